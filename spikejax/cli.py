@@ -11,6 +11,8 @@ import argparse
 import importlib
 import sys
 
+from spikejax.errors import UserError
+
 # name -> "module:function"; each function takes the parsed argparse.Namespace.
 REPRODUCTIONS = {
     "gaits": "robots.hexapod.reproduce:main",
@@ -18,10 +20,6 @@ REPRODUCTIONS = {
 BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",
 }
-
-
-class UserError(Exception):
-    """A mistake in what the user asked for: reported in one line, no traceback."""
 
 
 def _load(path: str):
