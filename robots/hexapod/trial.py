@@ -1,0 +1,61 @@
+"""The gait-convergence trial that sweep files name: train one SCPG, report whether it converged."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from robots.hexapod.gaits import N_GAITS
+from robots.hexapod.training import TrainParams, gait_correct, train
+
+
+class GaitTrialParams(NamedTuple):
+    """Traced parameters of a gait-convergence trial (see :class:`TrainParams`)."""
+
+    n_gaits: int = 3
+    alpha: float = 2.0
+    v_th: float = 1.0
+    w_low: float = 0.0
+    w_high: float = 1.0
+    lr: float = 1.0
+
+
+class GaitTrialResult(NamedTuple):
+    """One row of the convergence table.
+
+    Attributes:
+        converged: every trained gait reproduces its pattern from rest.
+        g1_ok, g2_ok, g3_ok: each gait on its own (untrained gaits are usually wrong).
+        epochs: training epochs run.
+    """
+
+    converged: jax.Array
+    g1_ok: jax.Array
+    g2_ok: jax.Array
+    g3_ok: jax.Array
+    epochs: jax.Array
+
+
+def convergence_trial(
+    params: GaitTrialParams,
+    key: jax.Array,
+    *,
+    train_cycles: int = 2,
+    max_epochs: int = 200,
+    eval_cycles: int = 10,
+    schedule: str = "interleaved",
+) -> GaitTrialResult:
+    """Train an SCPG on G1..G(n_gaits) and check each trained gait from rest for ``eval_cycles`` cycles."""
+    p = TrainParams(*(jnp.asarray(v, jnp.float32) for v in params))
+    result = train(p, key, train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule)
+    ok = gait_correct(p, result.weights, eval_cycles)
+    trained = jnp.arange(N_GAITS) < p.n_gaits
+    return GaitTrialResult(
+        converged=jnp.all(ok | ~trained),
+        g1_ok=ok[0],
+        g2_ok=ok[1],
+        g3_ok=ok[2],
+        epochs=result.epochs,
+    )

@@ -1,0 +1,123 @@
+"""Encoders that turn continuous signals into spikes, and the pre-processing before them.
+
+Every function is written for one population (no batch axis: ``jax.vmap`` adds it)
+and takes an explicit ``jax.random`` key where it is stochastic.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = [
+    "poisson_spikes",
+    "poisson_train",
+    "shift_scale",
+]
+
+
+def poisson_spikes(key: jax.Array, rates: jax.Array, dt) -> jax.Array:
+    """One time step of independent Poisson spike generators.
+
+    Each neuron spikes with probability ``p = 1 - exp(-rate dt)``, the exact
+    probability that a Poisson process of that rate has at least one event in a
+    window of length ``dt``. The snake R-STDP paper drives its input layer with
+    such Poisson neurons (Section II-B, D).
+
+    Args:
+        key: PRNG key, used once.
+        rates: firing rates, Hz, shape ``(n,)`` (any shape works); negative rates
+            are treated as 0.
+        dt: step length, s (scalar, may be traced).
+
+    Returns:
+        Spikes as a bool array of the shape of ``rates``.
+
+    Notes:
+        ``1 - exp(-rate dt)`` rather than ``rate dt`` clipped to 1: both agree to
+        ``O((rate dt)^2)`` when ``rate dt << 1``, but the clipped form is no
+        longer a probability of anything once ``rate dt`` approaches 1 and
+        saturates abruptly, whereas this one bins a true Poisson process: the
+        mean count over ``n`` steps is ``n (1 - exp(-rate dt))``, below
+        ``rate n dt`` only by the events that fell into an already-occupied step.
+
+    Examples:
+        >>> s = poisson_spikes(jax.random.key(0), jnp.full((4,), 100.0), 1e-3)
+        >>> s.shape, s.dtype
+        ((4,), dtype('bool'))
+    """
+    rates = jnp.asarray(rates)
+    dtype = rates.dtype if jnp.issubdtype(rates.dtype, jnp.floating) else jnp.float32
+    p = -jnp.expm1(-jnp.maximum(rates, 0.0) * dt)
+    return jax.random.uniform(key, rates.shape, dtype) < p
+
+
+def poisson_train(key: jax.Array, rates: jax.Array, dt, n_steps: int) -> jax.Array:
+    """A Poisson spike train of ``n_steps`` steps, `poisson_spikes` scanned over time.
+
+    Step ``k`` uses ``jax.random.split(key, n_steps)[k]``, so it equals
+    ``poisson_spikes(keys[k], rates_k, dt)`` and a simulation that draws its input
+    step by step with those keys sees the same train.
+
+    Args:
+        key: PRNG key, used once.
+        rates: firing rates, Hz: shape ``(n,)`` for constant rates or
+            ``(n_steps, n)`` for a rate per step.
+        dt: step length, s.
+        n_steps: number of steps (static: a ``static_argnames`` entry under ``jit``).
+
+    Returns:
+        Spikes, bool, shape ``(n_steps, n)``.
+
+    Raises:
+        ValueError: if ``rates`` is 2-D and its first axis is not ``n_steps`` long.
+
+    Examples:
+        >>> train = poisson_train(jax.random.key(1), jnp.array([0.0, 50.0]), 1e-3, 100)
+        >>> train.shape, bool(train[:, 0].any())
+        ((100, 2), False)
+    """
+    rates = jnp.asarray(rates)
+    keys = jax.random.split(key, n_steps)
+    if rates.ndim == 2:
+        if rates.shape[0] != n_steps:
+            raise ValueError(
+                f"rates has shape {rates.shape}: a rate per step needs shape (n_steps, n) "
+                f"with n_steps = {n_steps}"
+            )
+
+        def step(carry, xs):
+            k, r = xs
+            return carry, poisson_spikes(k, r, dt)
+
+        _, spikes = jax.lax.scan(step, None, (keys, rates))
+    else:
+
+        def step(carry, k):
+            return carry, poisson_spikes(k, rates, dt)
+
+        _, spikes = jax.lax.scan(step, None, keys)
+    return spikes
+
+
+def shift_scale(q: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
+    """Shifts and scales a signal before encoding, ``q_hat = a (q + b)``.
+
+    The RoboBee paper (Section III) passes ``q_hat_i = a_i (q_i + b_i)``, with
+    positive constants ``a_i`` and ``b_i``, into the network instead of each state
+    variable ``q_i``, so that states in their expected range give a positive input
+    current that makes the input groups fire.
+
+    Args:
+        q: signal, any shape.
+        a: scale, broadcasting with ``q``.
+        b: shift, in the units of ``q``, broadcasting with ``q``.
+
+    Returns:
+        ``a * (q + b)``, the broadcast shape.
+
+    Examples:
+        >>> float(shift_scale(jnp.float32(-0.5), 2.0, 1.0))
+        1.0
+    """
+    return a * (q + b)
