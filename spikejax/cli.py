@@ -16,6 +16,7 @@ from spikejax.errors import UserError
 # name -> "module:function"; each function takes the parsed argparse.Namespace.
 REPRODUCTIONS = {
     "gaits": "robots.hexapod.reproduce:main",
+    "gait-choices": "robots.hexapod.reproduce:main_choices",
 }
 BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",

@@ -347,7 +347,7 @@ def _build_spec(
                 f"(fields: {', '.join(fields) or 'none'})"
             )
     axes = tuple(
-        Axis(key, tuple(values), _field_kind(field_kinds[key], values, f"[grid] {key}", params_type))
+        Axis(key, tuple(values), _field_kind(field_kinds[key], values, "[grid]", key, params_type))
         for key, values in grid.items()
     )
     traced, static = _split_fixed(fixed, grid, params_type, field_kinds, keyword_only, takes_any_keyword, trial_path)
@@ -483,16 +483,18 @@ def _declared_kinds(params_type: type) -> dict[str, str | None]:
     return {field: by_type.get(hints.get(field)) for field in params_type._fields}
 
 
-def _field_kind(declared: str | None, values: list[Any], what: str, params_type: type) -> str:
+def _field_kind(declared: str | None, values: list[Any], section: str, field: str, params_type: type) -> str:
+    """The kind the trial receives ``values`` of ``field`` as: the annotation's, else the values'."""
+    what = f"{section} {field}"
+    shown = values if section == "[grid]" else values[0]
     kind = _value_kind(values, what)
     if declared is not None and declared != kind and (declared, kind) != ("float", "int"):
         raise UserError(
-            f"{what} must hold {declared} values ({params_type.__name__}.{what.split()[-1]} "
-            f"is declared {declared}), got {values!r}"
+            f"{what} must hold {declared} values ({params_type.__name__}.{field} is declared {declared}), got {shown!r}"
         )
     kind = declared or kind
     if kind == "int" and not all(_INT32_MIN <= value <= _INT32_MAX for value in values):
-        raise UserError(f"{what} must hold int32 values, got {values!r}")
+        raise UserError(f"{what} must hold int32 values, got {shown!r}")
     return kind
 
 
@@ -516,7 +518,7 @@ def _split_fixed(
                 f"and a keyword-only parameter of {trial_path}"
             )
         if key in params_type._fields:
-            kind = _field_kind(field_kinds[key], [value], f"[fixed] {key}", params_type)
+            kind = _field_kind(field_kinds[key], [value], "[fixed]", key, params_type)
             traced[key] = np.asarray(value, dtype=_KIND_DTYPES[kind])
         elif key in keyword_only or takes_any_keyword:
             static[key] = value
@@ -568,7 +570,9 @@ def _as_result_dict(result: Any, trial_path: str) -> dict[str, Any]:
         return dict(result._asdict())
     if isinstance(result, Mapping):
         return dict(result)
-    raise UserError(f"the trial {trial_path} must return a NamedTuple or a dict of scalars, got {type(result).__name__}")
+    raise UserError(
+        f"the trial {trial_path} must return a NamedTuple or a dict of scalars, got {type(result).__name__}"
+    )
 
 
 def _bound_trial(spec: SweepSpec) -> Callable[[Any, jax.Array], Any]:
@@ -597,7 +601,9 @@ def _result_columns(spec: SweepSpec) -> list[_Column]:
     columns = []
     for name in names:
         if not isinstance(name, str) or name in taken:
-            raise UserError(f"the trial {spec.trial_path} returns a result named {name!r}, which is not a free column name")
+            raise UserError(
+                f"the trial {spec.trial_path} returns a result named {name!r}, which is not a free column name"
+            )
         shape = shapes[name]
         if not isinstance(shape, jax.ShapeDtypeStruct) or shape.shape != ():
             raise UserError(
@@ -616,7 +622,9 @@ def _table_dtype(dtype: np.dtype, name: str, trial_path: str) -> str:
         return np.dtype(dtype).name
     if jnp.issubdtype(dtype, jnp.floating):
         return "float64" if dtype == np.float64 else "float32"
-    raise UserError(f"result '{name}' of the trial {trial_path} must be a bool, an integer or a real float, got {dtype}")
+    raise UserError(
+        f"result '{name}' of the trial {trial_path} must be a bool, an integer or a real float, got {dtype}"
+    )
 
 
 def _compile(spec: SweepSpec, results: list[_Column], size: int) -> Callable[..., tuple[jax.Array, ...]]:
@@ -984,7 +992,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
     Raises:
         UserError: ``out_dir`` holds another sweep or other files, another run is
             going on in it, or the trial does not return a NamedTuple or dict of
-            scalars. These are found before anything is compiled or written.
+            scalars. All are found before anything is compiled.
     """
     out = Path(out_dir)
     metadata = _read_metadata(out)

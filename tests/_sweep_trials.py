@@ -88,3 +88,12 @@ def vector_trial(params: ToyParams, key: jax.Array) -> dict[str, jax.Array]:
 
 def list_trial(params: ToyParams, key: jax.Array) -> list[jax.Array]:
     return [params.a]
+
+
+TRACES = []
+
+
+def counting_trial(params: ToyParams, key: jax.Array) -> ToyResult:
+    """``toy_trial``, counting its traces in ``TRACES``."""
+    TRACES.append(params)
+    return toy_trial(params, key)

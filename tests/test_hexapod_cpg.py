@@ -9,9 +9,9 @@ from spikejax import DiscreteLIFParams
 from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
 from robots.hexapod import gaits
 from robots.hexapod.cpg import CPGWeights, run_gait
-from robots.hexapod.training import TrainParams, _epoch_noise, gait_correct, train
+from robots.hexapod.reference import reference_gait_correct, reference_train
+from robots.hexapod.training import TrainParams, gait_correct, train
 from robots.hexapod.trial import GaitTrialParams, convergence_trial
-from spikejax.random import hash_seed
 
 
 def test_patterns_are_the_papers():
@@ -56,47 +56,16 @@ def test_rule_moves_only_erring_neurons_from_active_synapses():
     np.testing.assert_allclose(dw, expected)
 
 
-def _reference_train(p: TrainParams, key, train_cycles: int, max_epochs: int):
-    """Alg. 1 written as plain loops over epochs, gaits, steps and neurons (numpy)."""
-    alpha, v_th, lr, n_gaits = float(p.alpha), float(p.v_th), float(p.lr), int(p.n_gaits)
-    key_init, key_train = jax.random.split(key)
-    key_in, key_cpg = jax.random.split(key_init)
-    w_in = np.array(jax.random.uniform(key_in, (3, 6), minval=p.w_low, maxval=p.w_high))
-    w_cpg = np.array(jax.random.uniform(key_cpg, (6, 6), minval=p.w_low, maxval=p.w_high)) * (1 - np.eye(6))
-    seed = hash_seed(key_train)
-    n_steps = train_cycles * gaits.PERIOD
-    for epoch in range(max_epochs):
-        noise = np.asarray(_epoch_noise(seed, jnp.int32(epoch), (3, n_steps, 2, 6)))
-        errors = 0
-        for g in range(n_gaits):
-            v, s = np.zeros(6), np.zeros(6)
-            for t in range(n_steps):
-                s_prev = s.copy()
-                s = np.zeros(6)
-                for j in range(6):
-                    v[j] = v[j] / alpha + w_in[g, j] + s_prev @ w_cpg[:, j]
-                    if v[j] > v_th:
-                        s[j], v[j] = 1.0, 0.0
-                    err = s[j] - gaits.PATTERNS[g][t % gaits.PERIOD][j]
-                    errors += abs(err)
-                    w_in[g, j] -= lr * err * noise[g, t, 0, j]
-                    for i in range(6):
-                        if i != j:
-                            w_cpg[i, j] -= lr * err * s_prev[i] * noise[g, t, 1, j]
-        if errors == 0:
-            return w_in, w_cpg, epoch + 1
-    return w_in, w_cpg, max_epochs
-
-
 @pytest.mark.parametrize("n_gaits,seed", [(1, 0), (2, 1), (3, 2), (3, 3)])
 def test_training_matches_plain_loop_reference(n_gaits, seed):
     p = TrainParams(*(jnp.float32(v) for v in (n_gaits, 2.0, 1.0, 0.0, 1.0, 1.0)))
     key = jax.random.key(seed)
     got = train(p, key, train_cycles=2, max_epochs=60)
-    w_in, w_cpg, epochs = _reference_train(p, key, train_cycles=2, max_epochs=60)
+    w_in, w_cpg, epochs = reference_train(p, key, train_cycles=2, max_epochs=60)
     assert int(got.epochs) == epochs
     np.testing.assert_allclose(got.weights.w_in, w_in, atol=1e-4)
     np.testing.assert_allclose(got.weights.w_cpg, w_cpg, atol=1e-4)
+    np.testing.assert_array_equal(gait_correct(p, got.weights, 10), reference_gait_correct(p, w_in, w_cpg, 10))
 
 
 def test_converged_network_produces_every_gait_for_many_cycles():

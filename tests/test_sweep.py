@@ -126,6 +126,22 @@ def test_table_does_not_depend_on_chunk_size(tmp_path, chunk_size):
     assert _run(path, tmp_path / "out", chunk_size=chunk_size) == reference
 
 
+def test_one_compilation_for_all_chunks(tmp_path):
+    import _sweep_trials
+
+    path = _write(tmp_path, TOY.replace("toy_trial", "counting_trial").replace("scale = 2.0\n", ""))
+    _sweep_trials.TRACES.clear()
+    _run(path, tmp_path / "out", chunk_size=5)
+
+    # One trace to find the result columns, one to compile: none per chunk.
+    assert len(_sweep_trials.TRACES) == 2
+
+
+def test_keys_are_not_reused(tmp_path):
+    with jax.debug_key_reuse(True):
+        _run(_write(tmp_path, TOY), tmp_path / "out")
+
+
 def test_dict_results_keep_the_trials_order(tmp_path):
     path = _write(tmp_path, TOY.replace("toy_trial", "dict_trial").replace("scale = 2.0\n", ""))
     run_sweep(load_sweep(path), tmp_path / "out", progress=False)

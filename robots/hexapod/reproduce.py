@@ -1,0 +1,207 @@
+"""``spikejax reproduce gaits`` and ``gait-choices``: Fig. 4 of the hexapod SCPG paper and beyond.
+
+``gaits`` runs ``sweeps/gait_convergence.toml`` (and the same study with the
+gaits trained one after the other, ``sweeps/gait_convergence_blocked.toml``) and
+writes, in ``--out DIR``:
+
+- ``gait_convergence.csv``: n_gaits, trials, converged, fraction, ci_low, ci_high
+  (95 % Wilson interval), for the default (interleaved) schedule;
+- ``gait_convergence_blocked.csv``: the same for the blocked schedule;
+- ``gait_convergence_budget.csv``: the fraction converged within each training budget;
+- ``gait_convergence.png``: our bars with their intervals beside the paper's, and
+  convergence against the training budget;
+- ``sweeps/``: the sweeps' own result tables, from which a rerun resumes.
+
+``gait-choices`` runs ``sweeps/gait_choices.toml`` and writes ``gait_choices.csv``
+and ``gait_choices.png``, a heat map of three-gait convergence over the decay
+factor, the initial weight range and the update scale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from spikejax.errors import UserError
+from spikejax.stats import wilson_interval
+from spikejax.sweep import load_sweep, read_results, run_sweep
+
+SWEEPS = Path(__file__).resolve().parents[2] / "sweeps"
+
+# Fig. 4 and Sec. III-C: "> 80 %" for one and two gaits, "~ 20 %" for three (100 trials each).
+PAPER = {1: (0.80, ">"), 2: (0.80, ">"), 3: (0.20, "~")}
+BUDGETS = (10, 20, 30, 40, 50, 60, 80, 100, 150, 200)
+
+
+def _run(name: str, out: Path, args: argparse.Namespace) -> dict[str, np.ndarray]:
+    path = SWEEPS / f"{name}.toml"
+    if not path.exists():
+        raise UserError(f"sweep file {path} not found (install spikejax from its source tree: pip install -e .)")
+    spec = load_sweep(path, seeds=args.trials, chunk_size=args.chunk_size)
+    run_sweep(spec, out / "sweeps" / name, progress=not args.no_progress)
+    return read_results(out / "sweeps" / name)
+
+
+def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with open(tmp, "w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(header)
+        writer.writerows(rows)
+    tmp.replace(path)
+
+
+def summarize(table: dict[str, np.ndarray], by: list[str]) -> list[list]:
+    """One row per distinct value of the ``by`` columns: values, trials, converged, fraction, ci_low, ci_high."""
+    keys = np.stack([table[b] for b in by], axis=1)
+    rows = []
+    for point in np.unique(keys, axis=0):
+        mask = np.all(keys == point, axis=1)
+        n, k = int(mask.sum()), int(table["converged"][mask].sum())
+        low, high = wilson_interval(k, n)
+        rows.append([*(v.item() for v in point), n, k, round(k / n, 4), round(float(low), 4), round(float(high), 4)])
+    return rows
+
+
+def budget_curve(table: dict[str, np.ndarray], budgets=BUDGETS) -> list[list]:
+    """Fraction of trials converged within each budget of epochs, per number of gaits.
+
+    Training stops at the first error-free epoch and never changes afterwards, so
+    a trial that converged after ``e`` epochs converges under any budget ``>= e``
+    and under no smaller one.
+    """
+    rows = []
+    for n_gaits in np.unique(table["n_gaits"]):
+        mask = table["n_gaits"] == n_gaits
+        for b in budgets:
+            ok = table["converged"][mask] & (table["epochs"][mask] <= b)
+            rows.append([int(n_gaits), b, int(mask.sum()), round(float(ok.mean()), 4)])
+    return rows
+
+
+def _plot_gaits(path: Path, ours: list[list], blocked: list[list], budget: list[list]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.8))
+    x = np.arange(len(ours))
+    width = 0.27
+    for offset, rows, label, color in (
+        (-width, ours, "spikejax, interleaved (default)", "tab:blue"),
+        (0.0, blocked, "spikejax, blocked (Alg. 1 loops as written)", "tab:orange"),
+    ):
+        frac = np.array([r[3] for r in rows])
+        err = np.array([[r[3] - r[4] for r in rows], [r[5] - r[3] for r in rows]])
+        ax.bar(x + offset, 100 * frac, width, yerr=100 * err, capsize=3, color=color, label=f"{label}, n={rows[0][1]}")
+    paper = [PAPER[int(r[0])] for r in ours]
+    ax.bar(x + width, [100 * p for p, _ in paper], width, color="0.8", hatch="//", edgecolor="0.4",
+           label="paper, Fig. 4 (n=100)")
+    for xi, (p, rel) in zip(x, paper):
+        ax.text(xi + width, 100 * p + 2, f"{rel}{100 * p:.0f}", ha="center", fontsize=8)
+    ax.set_xticks(x, ["G1", "G1+G2", "G1+G2+G3"])
+    ax.set_ylabel("trials converged (%)")
+    ax.set_ylim(0, 112)
+    ax.set_title("Gait convergence, 95 % Wilson intervals")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1))
+
+    colors = {1: "tab:green", 2: "tab:purple", 3: "tab:red"}
+    for n_gaits in sorted({r[0] for r in budget}):
+        rows = [r for r in budget if r[0] == n_gaits]
+        bx.plot([r[1] for r in rows], [100 * r[3] for r in rows], "o-", color=colors[n_gaits],
+                label=f"{n_gaits} gait{'s' if n_gaits > 1 else ''}")
+        bx.axhline(100 * PAPER[n_gaits][0], color=colors[n_gaits], ls="--", lw=0.8)
+    bx.set_xscale("log")
+    bx.set_xlabel("training budget (epochs)")
+    bx.set_ylabel("trials converged within budget (%)")
+    bx.set_title("Interleaved schedule; dashed: the paper's values")
+    bx.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(args: argparse.Namespace) -> int:
+    """``spikejax reproduce gaits --out DIR [--trials N]``."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    header = ["n_gaits", "trials", "converged", "fraction", "ci_low", "ci_high"]
+    table = _run("gait_convergence", out, args)
+    ours = summarize(table, ["n_gaits"])
+    _write_csv(out / "gait_convergence.csv", header, ours)
+    blocked = summarize(_run("gait_convergence_blocked", out, args), ["n_gaits"])
+    _write_csv(out / "gait_convergence_blocked.csv", header, blocked)
+    budget = budget_curve(table)
+    _write_csv(out / "gait_convergence_budget.csv", ["n_gaits", "budget", "trials", "fraction"], budget)
+    _plot_gaits(out / "gait_convergence.png", ours, blocked, budget)
+
+    print(f"{'gaits':<10}{'interleaved':>22}{'blocked':>22}{'paper':>10}")
+    for r, b in zip(ours, blocked):
+        p, rel = PAPER[int(r[0])]
+        print(f"{r[0]:<10}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{b[3]:>8.1%} [{b[4]:.1%}, {b[5]:.1%}]{rel:>6}{p:.0%}")
+    print(f"wrote {out / 'gait_convergence.csv'} and {out / 'gait_convergence.png'}")
+    return 0
+
+
+def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, ...]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    alphas, w_highs, lrs = (np.unique(table[k]) for k in ("alpha", "w_high", "lr"))
+    fig, axes = plt.subplots(
+        len(budgets), len(w_highs), figsize=(4.2 * len(w_highs) + 1, 3.6 * len(budgets)), squeeze=False,
+        layout="constrained",
+    )
+    for i, budget in enumerate(budgets):
+        for j, w_high in enumerate(w_highs):
+            grid = np.zeros((len(alphas), len(lrs)))
+            for a, alpha in enumerate(alphas):
+                for l, lr in enumerate(lrs):
+                    m = (table["alpha"] == alpha) & (table["w_high"] == w_high) & (table["lr"] == lr)
+                    grid[a, l] = np.mean(table["converged"][m] & (table["epochs"][m] <= budget))
+            ax = axes[i, j]
+            im = ax.imshow(100 * grid, vmin=0, vmax=100, cmap="viridis", origin="lower", aspect="auto")
+            for a in range(len(alphas)):
+                for l in range(len(lrs)):
+                    ax.text(l, a, f"{100 * grid[a, l]:.0f}", ha="center", va="center", fontsize=7,
+                            color="w" if grid[a, l] < 0.6 else "k")
+            ax.set_xticks(range(len(lrs)), [f"{v:g}" for v in lrs])
+            ax.set_yticks(range(len(alphas)), [f"{v:g}" for v in alphas])
+            if i == len(budgets) - 1:
+                ax.set_xlabel("update scale eta / V_th")
+            if j == 0:
+                ax.set_ylabel("decay factor alpha")
+            ax.set_title(f"init U(0, {w_high:g} V_th), budget {budget} epochs", fontsize=9)
+    fig.colorbar(im, ax=axes, shrink=0.6, label="three-gait convergence (%)")
+    fig.suptitle("Three gaits (G1+G2+G3): where convergence is highest")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main_choices(args: argparse.Namespace) -> int:
+    """``spikejax reproduce gait-choices --out DIR [--trials N]``."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = _run("gait_choices", out, args)
+    rows = summarize(table, ["alpha", "w_high", "lr"])
+    for row in rows:
+        m = (table["alpha"] == row[0]) & (table["w_high"] == row[1]) & (table["lr"] == row[2])
+        ok = table["converged"][m]
+        row.append(round(float(np.mean(ok & (table["epochs"][m] <= 50))), 4))
+        row.append(float(np.median(table["epochs"][m][ok])) if ok.any() else float("nan"))
+    header = ["alpha", "w_high", "lr", "trials", "converged", "fraction", "ci_low", "ci_high", "fraction_50", "median_epochs"]
+    _write_csv(out / "gait_choices.csv", header, rows)
+    max_epochs = int(table["epochs"].max())
+    _plot_choices(out / "gait_choices.png", table, (50, max(max_epochs, 50)))
+    best = sorted(rows, key=lambda r: -r[5])[:5]
+    print("highest three-gait convergence (alpha, w_high/V_th, eta/V_th): fraction [95 % CI]")
+    for r in best:
+        print(f"  alpha={r[0]:g} w_high={r[1]:g} eta={r[2]:g}: {r[5]:.1%} [{r[6]:.1%}, {r[7]:.1%}]")
+    print(f"wrote {out / 'gait_choices.csv'} and {out / 'gait_choices.png'}")
+    return 0

@@ -1,0 +1,36 @@
+"""Summary statistics for sweep tables."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["wilson_interval"]
+
+
+def wilson_interval(successes, trials, z: float = 1.959963984540054) -> tuple[np.ndarray, np.ndarray]:
+    """Wilson score interval for a binomial proportion (95 % by default).
+
+    Unlike the normal approximation it stays inside [0, 1] and keeps its width
+    when the proportion is 0 or 1, as convergence fractions often are.
+
+    Args:
+        successes: number of successes, scalar or array.
+        trials: number of trials (> 0), same shape.
+        z: the normal quantile; 1.96 for a 95 % interval.
+
+    Returns:
+        ``(low, high)`` arrays of the interval's bounds.
+
+    References:
+        E. B. Wilson (1927), Probable inference, the law of succession, and
+        statistical inference. J. Am. Stat. Assoc. 22(158), 209-212.
+    """
+    k = np.asarray(successes, dtype=np.float64)
+    n = np.asarray(trials, dtype=np.float64)
+    if np.any(n <= 0) or np.any(k < 0) or np.any(k > n):
+        raise ValueError("need 0 <= successes <= trials and trials > 0")
+    p = k / n
+    denom = 1.0 + z**2 / n
+    centre = (p + z**2 / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n**2)) / denom
+    return np.clip(centre - half, 0.0, 1.0), np.clip(centre + half, 0.0, 1.0)
