@@ -124,3 +124,15 @@ def test_one_gait_converges_almost_always():
     result = jax.jit(jax.vmap(convergence_trial))(params, keys)
     assert float(result.converged.mean()) > 0.95
     assert not bool(result.g2_ok.any() & result.g3_ok.any() & result.g1_ok.all())
+
+
+def test_replay_is_the_tables_trial():
+    from spikejax.sweep import trial_key
+    from robots.hexapod.trial import replay_trial
+
+    params = GaitTrialParams(n_gaits=3)
+    row = jax.jit(convergence_trial)(params, trial_key(0, 5))
+    result, rasters = replay_trial(params, 5)
+    assert int(result.epochs) == int(row.epochs)
+    ok = [np.array_equal(rasters[g], gaits.required_spikes(g, rasters.shape[1])) for g in range(3)]
+    assert ok == [bool(row.g1_ok), bool(row.g2_ok), bool(row.g3_ok)]

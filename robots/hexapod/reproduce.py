@@ -24,6 +24,7 @@ import csv
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from spikejax.errors import UserError
 from spikejax.stats import wilson_interval
@@ -83,12 +84,8 @@ def budget_curve(table: dict[str, np.ndarray], budgets=BUDGETS) -> list[list]:
 
 
 def _plot_gaits(path: Path, ours: list[list], blocked: list[list], budget: list[list]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.8))
+    fig = Figure(figsize=(11, 4.8))
+    ax, bx = fig.subplots(1, 2)
     x = np.arange(len(ours))
     width = 0.27
     for offset, rows, label, color in (
@@ -122,7 +119,6 @@ def _plot_gaits(path: Path, ours: list[list], blocked: list[list], budget: list[
     bx.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -148,16 +144,9 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, ...]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     alphas, w_highs, lrs = (np.unique(table[k]) for k in ("alpha", "w_high", "lr"))
-    fig, axes = plt.subplots(
-        len(budgets), len(w_highs), figsize=(4.2 * len(w_highs) + 1, 3.6 * len(budgets)), squeeze=False,
-        layout="constrained",
-    )
+    fig = Figure(figsize=(4.2 * len(w_highs) + 1, 3.6 * len(budgets)), layout="constrained")
+    axes = fig.subplots(len(budgets), len(w_highs), squeeze=False)
     for i, budget in enumerate(budgets):
         for j, w_high in enumerate(w_highs):
             grid = np.zeros((len(alphas), len(lrs)))
@@ -181,7 +170,6 @@ def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, 
     fig.colorbar(im, ax=axes, shrink=0.6, label="three-gait convergence (%)")
     fig.suptitle("Three gaits (G1+G2+G3): where convergence is highest")
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main_choices(args: argparse.Namespace) -> int:

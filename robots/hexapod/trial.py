@@ -59,3 +59,34 @@ def convergence_trial(
         g3_ok=ok[2],
         epochs=result.epochs,
     )
+
+
+def replay_trial(
+    params: GaitTrialParams,
+    seed: int,
+    *,
+    base_seed: int = 0,
+    train_cycles: int = 2,
+    max_epochs: int = 200,
+    eval_cycles: int = 10,
+    schedule: str = "interleaved",
+):
+    """Re-run the trial of ``seed`` from a sweep table and return what it learned.
+
+    The key is the sweep engine's (:func:`spikejax.sweep.trial_key`), so the
+    replay is the very trial of the table's row with this seed and these params.
+
+    Returns:
+        ``(train_result, rasters)``: the :class:`TrainResult` and the CPG raster
+        of each gait switched on from rest, shape (3, eval_cycles * PERIOD, 6).
+    """
+    from spikejax import DiscreteLIFParams
+    from spikejax.sweep import trial_key
+    from robots.hexapod.cpg import run_gait
+    from robots.hexapod.gaits import PERIOD
+
+    p = TrainParams(*(jnp.asarray(v, jnp.float32) for v in params))
+    result = train(p, trial_key(base_seed, seed), train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule)
+    neuron = DiscreteLIFParams(alpha=p.alpha, v_th=p.v_th)
+    rasters = jnp.stack([run_gait(neuron, result.weights, g, eval_cycles * PERIOD) for g in range(N_GAITS)])
+    return result, rasters
