@@ -15,6 +15,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(VENV)/bin/spikejax reproduce gaits --out $(OUT)
+	$(VENV)/bin/spikejax reproduce gait-choices --out $(OUT)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"

@@ -36,7 +36,8 @@ def test_reproduce_gaits_writes_table_and_figure(tmp_path):
         budget = [r for r in csv.DictReader(f) if r["n_gaits"] == "3"]
     fractions = [float(r["fraction"]) for r in budget]
     assert fractions == sorted(fractions)  # converging within a budget is monotone in the budget
-    assert fractions[-1] == float(rows[2]["fraction"])  # the largest budget is the sweep's own
+    assert budget[-1]["epochs"] == "200"  # 600 presentations for 3 gaits: the sweep's whole budget
+    assert fractions[-1] == float(rows[2]["fraction"])
 
     # Run again: everything is on disk, nothing is recomputed, the tables are unchanged.
     before = (out / "gait_convergence.csv").read_bytes()
