@@ -596,7 +596,12 @@ def _result_columns(spec: SweepSpec) -> list[_Column]:
         names.extend(result)  # dicts come back with sorted keys; keep the trial's order
         return result
 
-    shapes = jax.eval_shape(probe, _example_params(spec), jax.random.key(0))
+    try:
+        shapes = jax.eval_shape(probe, _example_params(spec), jax.random.key(0))
+    except (ValueError, TypeError) as err:
+        # A trial that validates its own arguments (a bad [fixed] choice, say) says why here.
+        message = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise UserError(f"the trial {spec.trial_path} rejects the sweep's values: {message}") from None
     taken = {column.name for column in _key_columns(spec)}
     columns = []
     for name in names:

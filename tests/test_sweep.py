@@ -381,3 +381,20 @@ def test_bad_file_from_the_command_line(tmp_path, case):
 
     _assert_one_line_error(done.returncode, done.stderr, expected)
     assert not out.exists()
+
+
+def test_trial_rejecting_a_fixed_value_is_a_one_line_error(tmp_path):
+    """A trial's own ValueError for a bad static value is reported like any bad sweep file."""
+    path = tmp_path / "bad.toml"
+    path.write_text(
+        '[sweep]\nname = "x"\ntrial = "robots.hexapod.trial:convergence_trial"\nseeds = 2\n'
+        '[fixed]\nschedule = "zigzag"\n[grid]\nn_gaits = [1]\n'
+    )
+    run = subprocess.run(
+        [sys.executable, "-m", "spikejax.cli", "sweep", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert run.returncode == 2
+    assert "Traceback" not in run.stderr and run.stderr.count("\n") == 1
+    assert "schedule must be 'interleaved' or 'blocked'" in run.stderr
+    assert not (tmp_path / "out").exists()
