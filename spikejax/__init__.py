@@ -11,6 +11,10 @@ from spikejax.neurons import lif_init
 from spikejax.neurons import lif_step
 from spikejax.neurons import lif_rate
 from spikejax.neurons import lif_first_spike_time
+from spikejax.coding import DecoderParams
+from spikejax.coding import DecoderState
+from spikejax.coding import decoder_init
+from spikejax.coding import decoder_step
 from spikejax.coding import poisson_spikes
 from spikejax.coding import poisson_train
 from spikejax.coding import shift_scale
@@ -29,6 +33,10 @@ __all__ = [
     "lif_step",
     "lif_rate",
     "lif_first_spike_time",
+    "DecoderParams",
+    "DecoderState",
+    "decoder_init",
+    "decoder_step",
     "poisson_spikes",
     "poisson_train",
     "shift_scale",

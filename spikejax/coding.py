@@ -6,10 +6,16 @@ and takes an explicit ``jax.random`` key where it is stochastic.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 
 __all__ = [
+    "DecoderParams",
+    "DecoderState",
+    "decoder_init",
+    "decoder_step",
     "poisson_spikes",
     "poisson_train",
     "shift_scale",
@@ -121,3 +127,80 @@ def shift_scale(q: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
         1.0
     """
     return a * (q + b)
+
+
+class DecoderParams(NamedTuple):
+    """Parameters of the leaky-integrator decoder, Eq. (8) of the RoboBee paper.
+
+    Attributes:
+        alpha: output per unit of the spike trace (the scale ``alpha``), in the
+            units of the decoded signal.
+        beta: decay rate ``beta`` of each spike's contribution, 1/s, > 0; ``1 / beta``
+            trades a faster response for less noise.
+        gamma: offset ``gamma``, units of the decoded signal; ``-gamma`` is the
+            output of a silent population.
+    """
+
+    alpha: jax.Array
+    beta: jax.Array
+    gamma: jax.Array
+
+
+class DecoderState(NamedTuple):
+    """State of the decoder.
+
+    Attributes:
+        trace: ``sum_{t_f < t} exp(beta (t_f - t))`` over all the population's
+            spikes, dimensionless, shape ``()``.
+    """
+
+    trace: jax.Array
+
+
+def decoder_init(dtype=jnp.float32) -> DecoderState:
+    """The decoder before any spike: a zero trace (output ``-gamma``)."""
+    return DecoderState(trace=jnp.zeros((), dtype))
+
+
+def decoder_step(
+    params: DecoderParams, state: DecoderState, spikes: jax.Array, dt
+) -> tuple[DecoderState, jax.Array]:
+    """One step of the leaky-integrator population decoder, Eq. (8) of the RoboBee paper.
+
+    Eq. (8), ``y_hat(t) = alpha * sum_{t_f < t} exp(beta (t_f - t)) - gamma``, the
+    sum running over the spike times ``t_f`` of every neuron of the population,
+    is computed exactly by a trace that takes the spikes stamped ``t_k`` (as
+    `spikejax.lif_step` stamps them) and decays over the step::
+
+        trace(t_k + dt) = exp(-beta dt) * (trace(t_k) + n_k),
+        y_hat(t_k + dt) = alpha * trace(t_k + dt) - gamma,
+
+    ``n_k`` being the number of spikes in the step. A spike at ``t_k`` thus
+    contributes ``alpha exp(-beta dt)`` at ``t_k + dt`` (``t_f < t`` is strict).
+
+    Args:
+        params: scale, decay rate and offset.
+        state: the trace at ``t_k``.
+        spikes: the population's spikes of the step from ``t_k``, bool or 0/1, shape ``(n,)``.
+        dt: step length, s.
+
+    Returns:
+        The state and the decoded output ``y_hat`` at ``t_k + dt``, shape ``()``.
+
+    Notes:
+        For a population of ``N`` neurons each spiking with probability ``p``
+        per step (rate ``nu ~ p / dt``), the mean output in the steady state is
+        ``alpha * N p exp(-beta dt) / (1 - exp(-beta dt)) - gamma``, about
+        ``alpha N nu / beta - gamma`` when ``beta dt << 1``.
+
+    Examples:
+        >>> p = DecoderParams(alpha=jnp.float32(1.0), beta=jnp.float32(10.0),
+        ...                   gamma=jnp.float32(0.0))
+        >>> s, y = decoder_step(p, decoder_init(), jnp.array([True, True]), 0.1)
+        >>> round(float(y), 4)
+        0.7358
+    """
+    n = jnp.sum(jnp.asarray(spikes, state.trace.dtype))
+    decay = jnp.exp(-params.beta * dt)
+    trace = (decay * (state.trace + n)).astype(state.trace.dtype)
+    return DecoderState(trace=trace), params.alpha * trace - params.gamma

@@ -5,11 +5,17 @@
 """
 
 from spikejax.plasticity.base import PlasticityRule
+from spikejax.plasticity.hebbian import RewardHebbianParams
+from spikejax.plasticity.hebbian import RewardHebbianState
+from spikejax.plasticity.hebbian import reward_modulated_hebbian
 from spikejax.plasticity.supervised import StochasticSupervisedParams
 from spikejax.plasticity.supervised import stochastic_supervised
 
 __all__ = [
     "PlasticityRule",
+    "RewardHebbianParams",
+    "RewardHebbianState",
+    "reward_modulated_hebbian",
     "StochasticSupervisedParams",
     "stochastic_supervised",
 ]
