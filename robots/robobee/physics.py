@@ -62,7 +62,9 @@ def load_model() -> mjx.Model:
     Its arrays take JAX's default float dtype (float32 unless ``jax_enable_x64``
     was set before the first call).
     """
-    return mjx.put_model(load_mj_model())
+    # Built eagerly even when first asked for inside a trace, so the cache never holds a tracer.
+    with jax.ensure_compile_time_eval():
+        return mjx.put_model(load_mj_model())
 
 
 def set_params(model: mjx.Model, params: RoboBeeParams) -> mjx.Model:

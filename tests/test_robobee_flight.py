@@ -1,0 +1,30 @@
+"""Closed-loop flights through `robots.robobee.flight.fly` (the LQR steering; the SNN learning beside it)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from robots.robobee.controller import ControllerConfig, controller_params
+from robots.robobee.flight import flight_plan, fly
+from robots.robobee.lqr import altitude_gains, lateral_gain
+from robots.robobee.params import default_params
+
+
+def test_lqr_flight_reaches_both_waypoints_and_holds_q0():
+    robot = default_params()
+    K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
+    plan = flight_plan("waypoints")
+    rec = jax.jit(
+        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_gains(), plan, key, False,
+                        hold_steps=2000, segment_steps=10000)
+    )(jax.random.key(0))
+    t, q = np.asarray(rec.t), np.asarray(rec.q)
+    # The hold keeps the state at q0 exactly (Sec. V: the first 500 ms in the paper).
+    np.testing.assert_allclose(q[t <= 0.2], np.broadcast_to(np.asarray(plan.q0), q[t <= 0.2].shape), atol=1e-7)
+    for end, target in ((1.2, plan.waypoints[0]), (2.2, plan.waypoints[1])):
+        i = np.searchsorted(t, end - 1e-6)
+        assert np.hypot(q[i, 2] - target[2], q[i, 3] - target[3]) < 2e-3
+        assert abs(q[i, 0]) < 0.05
+    assert np.abs(q[:, 0]).max() < np.pi / 2
+    # The teacher is clipped to the actuator's range.
+    assert np.abs(np.asarray(rec.y_lqr)).max() <= 1.0
