@@ -28,3 +28,24 @@ def test_lqr_flight_reaches_both_waypoints_and_holds_q0():
     assert np.abs(q[:, 0]).max() < np.pi / 2
     # The teacher is clipped to the actuator's range.
     assert np.abs(np.asarray(rec.y_lqr)).max() <= 1.0
+
+
+def test_snn_flight_learning_online_reaches_both_waypoints():
+    # The paper's Fig. 8: the SNN, learning from the LQR while it steers, flies q0 -> q1 -> q2.
+    robot = default_params()
+    K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
+    plan = flight_plan("waypoints")
+    run = jax.jit(jax.vmap(
+        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_gains(), plan, key, True,
+                        hold_steps=5000, segment_steps=10000)
+    ))
+    rec = run(jax.vmap(jax.random.key)(jnp.arange(3)))
+    t, q = np.asarray(rec.t[0]), np.asarray(rec.q)
+    for end, target in ((1.5, plan.waypoints[0]), (2.5, plan.waypoints[1])):
+        i = np.searchsorted(t, end - 1e-6)
+        assert np.all(np.hypot(q[:, i, 2] - target[2], q[:, i, 3] - target[3]) < 5e-3)
+    assert np.all(np.abs(q[:, :, 0]).max(axis=1) < np.pi / 2)
+    # The SNN's torque follows the teacher's after the hold (RMS in units of the torque limit).
+    after = t > 0.5
+    rms = np.sqrt(np.mean((np.asarray(rec.y_hat) - np.asarray(rec.y_lqr))[:, after] ** 2, axis=1))
+    assert np.all(rms < 0.5)

@@ -24,6 +24,9 @@ learning, its output misses the same teacher by about 90 % of the teacher's
 RMS: every input neuron's rate rises with its state variable, and all the
 synapses leaving a neuron move together, so the weights follow the teacher's
 current value rather than its dependence on ``q``. Keep ``learn`` on in closed loop.
+(Those figures are for an open-loop-tuned decoder, ``beta = 20/s``, and
+``mu = 1e-4``; the defaults, ``beta = 100/s`` and ``mu = 1e-3``, trade a noisier
+output for the short lag the closed loop needs, see `controller_params`.)
 """
 
 from __future__ import annotations
@@ -179,11 +182,11 @@ def controller_params(
     v_th_high=1.7,
     w_min=-2.0,
     w_max=2.0,
-    alpha=0.008,
-    beta=20.0,
+    alpha=0.04,
+    beta=100.0,
     gamma=2.0,
-    mu_hidden=1e-4,
-    mu_output=1e-4,
+    mu_hidden=1e-3,
+    mu_output=1e-3,
     tau_reward=5e-3,
     dtype=jnp.float32,
 ) -> ControllerParams:
@@ -228,12 +231,17 @@ def controller_params(
         alpha: decoder scale, units of `TORQUE_UNIT`. With ``beta`` and ``gamma``,
             ``y_hat ~ alpha N nu / beta - gamma = 0.02 nu - 2`` for an output rate
             ``nu`` in Hz: 100 Hz is 0 and 50 or 150 Hz is -1 or +1, the torque limit.
-        beta: decoder decay rate, 1/s; a 50 ms window trades noise against lag
-            (10/s with ``alpha`` halved gives 2.4 % but doubles the lag a
-            closed loop sees).
+        beta: decoder decay rate, 1/s. 100/s (a 10 ms window) keeps the
+            decoder's lag well inside the closed loop's bandwidth (LQR poles up to
+            32/s; the robot's unstable pair grows at 7.5/s): with 20/s (50 ms) every
+            SNN flight tumbled, with 100-200/s all reach both waypoints
+            (``tests/test_robobee_flight.py``). Open loop, a longer window is
+            smoother (20/s gives 4-5 % tracking error).
         gamma: decoder offset, units of `TORQUE_UNIT`.
         mu_hidden: learning rate of the input->hidden weights.
-        mu_output: learning rate of the hidden->output weights. With 1e-4 a
+        mu_output: learning rate of the hidden->output weights. 1e-3: in closed
+            loop the network must follow the teacher within tens of ms (1e-4 and
+            1e-2 tumble, 3e-3 sometimes). Open loop, measured at 1e-4: a
             presynaptic neuron firing at 100 Hz (mean ``r`` about 1.4 at
             ``tau_reward = 5 ms``) moves its weights by up to 1.4 per second,
             fast enough to follow a teacher varying at about 1 Hz: 3e-5 lags
@@ -362,9 +370,11 @@ def controller_step(
 ) -> tuple[ControllerState, jax.Array]:
     """One neural step of the controller, from ``t_k`` to ``t_k + dt``.
 
-    1. Encoding (Section III): ``q_hat = a (q + b)``; every neuron of group ``g``
-       gets the current ``input_gain * q_hat_g``, its threshold making it a
-       different rectified feature of ``q_g``.
+    1. Encoding (Section III): ``q_hat = a (q + b)``; in each group of
+       ``n_per_input`` neurons, the first half gets the current
+       ``input_gain * q_hat_g`` and the second half ``input_gain * (1 - q_hat_g)``
+       (antagonist halves), each threshold making a neuron a different rectified
+       feature of ``q_g``.
     2. The input, hidden and output layers take one exact LIF step each
        (Eq. (6)-(7)); a layer's spikes of this step drive the next layer in the
        same step, with current ``syn * W^T spikes``.
@@ -390,7 +400,15 @@ def controller_step(
         units of `TORQUE_UNIT`, shape ``()``.
     """
     q_hat = shift_scale(q_lateral, params.a, params.b)
-    current_in = jnp.repeat(params.input_gain * q_hat, config.n_per_input)
+    # Antagonist halves: the first half of each group is driven by q_hat, the second by
+    # 1 - q_hat, so some neurons stay active whichever way a variable moves and the
+    # presynaptic rule can push the output both ways (with one-sided encoding, a large
+    # negative error silenced a whole group and the SNN flight tumbled).
+    half = config.n_per_input // 2
+    drive = jnp.concatenate(
+        [jnp.repeat(q_hat[:, None], half, 1), jnp.repeat(1.0 - q_hat[:, None], config.n_per_input - half, 1)], axis=1
+    )
+    current_in = params.input_gain * drive.reshape(-1)
     p_in = _lif(params, params.tau_input, state.v_th_input)
     p_h = _lif(params, params.tau_hidden, state.v_th_hidden)
     p_out = _lif(params, params.tau_output, state.v_th_output)
