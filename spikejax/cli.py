@@ -17,6 +17,8 @@ from spikejax.errors import UserError
 REPRODUCTIONS = {
     "gaits": "robots.hexapod.reproduce:main",
     "gait-choices": "robots.hexapod.reproduce:main_choices",
+    "robobee": "robots.robobee.reproduce:main",
+    "robobee-learning": "robots.robobee.reproduce:main_learning",
 }
 BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",
