@@ -1,0 +1,598 @@
+"""``spikejax bench robobee``: closed-loop RoboBee flights per second, spikejax against Brian2.
+
+One flight is the closed loop of Sec. V of the RoboBee paper: the 200-100-50
+LIF controller steers the robot laterally while it learns online from the LQR
+teacher (reward-modulated Hebbian rule, Eq. (9)-(10), on both weight layers),
+the altitude controller sets the lift, and the robot is integrated one physics
+step per neural step (``dt = 0.1 ms``). The flight plan is the paper's first
+one, ``q0 -> q1 -> q2`` (`robots.robobee.flight.flight_plan("waypoints")`),
+scaled to the flight's duration: the first 20 % holds the robot at ``q0`` (the
+paper's 500 ms hold of a 2.5 s flight), the rest is split equally between the
+two waypoints.
+
+- `run_spikejax_flights`: ``jax.jit(jax.vmap(fly))`` over network seeds (and,
+  optionally, robots drawn by `robots.robobee.params.randomize`): SNN,
+  plasticity, decoder, teacher and MJX physics in one compiled ``lax.scan``.
+- `run_brian2_closed_loop`: the paper's own setup. "At every time step, the
+  simulator calls a function to update the RoboBee state and another function
+  to compute the weight changes for each set of synapses following equation
+  (10)": the same network (the same drawn weights, connectivity and thresholds
+  as spikejax's flight 0) in Brian2's runtime mode, and a
+  ``network_operation`` that runs at the end of every step (see
+  `Brian2Flight`).
+
+Each returns a row with compile or build time apart from run time, flights per
+second, simulated seconds per wall-clock second and aggregate neuron updates
+per second (350 neurons x steps x flights / run seconds). `main` prints the
+closed-loop table and then the network-alone table of
+`robots.robobee.bench_network.main_network`.
+
+Notes:
+    What Brian2 does in one step ``k`` (from ``t_k`` to ``t_k + dt``), in the
+    order of `controller_step` (every object in one schedule slot, ordered):
+
+    1. The input layer integrates the current that the network operation set
+       at the end of the previous step (``method='exact'``, refractory 2 ms),
+       tests its thresholds and resets.
+    2. The input -> hidden synapses add ``syn_hidden * w`` to the hidden
+       neurons' current ``I`` for every input spike of this step (no delay);
+       the hidden layer integrates that current over the step, tests and
+       resets; the same for hidden -> output (``syn_output``).
+    3. The network operation (Python, NumPy) reads the three layers' spikes of
+       the step (``NeuronGroup.spikes``), updates the decoder of Eq. (8), the
+       traces of Eq. (9) and, by Eq. (10), the weights of both synapse sets
+       in place in Brian2's own arrays (clipped to ``[w_min, w_max]``);
+       applies the lift of the altitude controller and the decoded torque to
+       the robot, one semi-implicit Euler step of
+       `robots.robobee.dynamics.rhs` (MuJoCo's integrator, so the same
+       arithmetic as the MJX step of `robots.robobee.physics`, in float64;
+       held at ``q0`` during the hold); then computes the next step's target,
+       LQR teacher and encoder currents (antagonist halves as in
+       `controller_step`) and writes them into the input layer, and zeroes
+       the synaptic currents of the other two layers.
+
+    That is the algorithm of `robots.robobee.flight.fly` step for step;
+    Brian2 computes in float64 and spikejax in float32, so the spike trains
+    part where float32 rounding decides a threshold test, and from there the
+    two learning networks drift apart like two seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import platform
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from robots.robobee import bench_network
+from robots.robobee.controller import TORQUE_UNIT
+from robots.robobee.controller import ControllerConfig
+from robots.robobee.controller import controller_params
+from robots.robobee.controller import init_controller
+from robots.robobee.dynamics import LATERAL
+from robots.robobee.dynamics import clip_controls
+from robots.robobee.dynamics import rhs
+from robots.robobee.flight import flight_plan
+from robots.robobee.flight import fly
+from robots.robobee.lqr import altitude_gains
+from robots.robobee.lqr import lateral_gain
+from robots.robobee.params import default_params
+from robots.robobee.params import max_lift
+from robots.robobee.params import randomize
+
+__all__ = [
+    "BATCHES",
+    "Brian2Flight",
+    "FlightSetup",
+    "flight_setup",
+    "flight_steps",
+    "main",
+    "run_brian2_closed_loop",
+    "run_spikejax_flights",
+]
+
+DT = 1e-4  # s, the neural and physics step
+FLIGHT_S = 2.5  # s: hold 0.5 s + 2 x 1 s, the paper's first flight
+HOLD_FRACTION = 0.2
+RECORD_EVERY = 10
+BATCHES = (1, 16, 256, 1024, 4096)
+# Flight-steps (flights x steps) one timed spikejax run may take: a batch whose
+# whole flights would exceed it flies shorter flights and its flights/s is
+# extrapolated to the full flight (every step costs the same, hold included).
+STEP_BUDGET = 256 * 25_000
+# Simulated seconds Brian2 is timed on (about 1.5 ms of wall time per step).
+BRIAN2_S = 0.2
+# Distance (x, z) to a waypoint at the end of its segment that counts as reached, m.
+REACHED_M = 5e-3
+N_NEURONS = 350
+
+ROW_FIELDS = ("impl", "batch", "flight_s", "timed_s", "build_or_compile_s", "run_s", "flights_per_s",
+              "sim_s_per_wall_s", "neuron_updates_per_s", "reached_q1", "reached_q2")
+
+
+def flight_steps(duration: float, record_every: int = RECORD_EVERY) -> tuple[int, int]:
+    """``(hold_steps, segment_steps)`` of a ``duration``-second flight: 20 % hold, two equal segments.
+
+    Both are multiples of ``record_every``; ``hold + 2 segments`` is ``duration``
+    rounded down to whole blocks of ``record_every`` steps (2.5 s: 5,000 and 10,000).
+    """
+    blocks = round(duration / DT) // record_every
+    hold = round(HOLD_FRACTION * blocks)
+    segment = (blocks - hold) // 2
+    if segment < 1:
+        raise ValueError(f"a flight of {duration} s is too short for a hold and two segments")
+    return hold * record_every, segment * record_every
+
+
+class FlightSetup(NamedTuple):
+    """Everything a batch of flights shares or draws, as `fly` takes it.
+
+    Attributes:
+        config: network sizes (static).
+        cparams: controller parameters (`controller_params` defaults).
+        robots: the flown robots, each field ``(batch,)``; the nominal robot
+            repeated unless randomized.
+        K: the teacher's LQR gain for the nominal robot, ``(4,)``.
+        altitude: the altitude controller's gains.
+        plan: ``q0`` and the two waypoints of the paper's first flight.
+        keys: one network key per flight, ``(batch,)``; flight 0's is the
+            network that Brian2 simulates for the same seed.
+    """
+
+    config: ControllerConfig
+    cparams: object
+    robots: object
+    K: jax.Array
+    altitude: object
+    plan: object
+    keys: jax.Array
+
+
+def flight_setup(batch: int, seed: int, randomize_robots: bool = False) -> FlightSetup:
+    """The batch's setup for ``seed``: network keys ``split(key(seed), batch)``, robots nominal or randomized."""
+    robot = default_params()
+    keys = jax.random.split(jax.random.key(seed), batch)
+    if randomize_robots:
+        robots = jax.vmap(randomize, in_axes=(None, 0))(robot, jax.random.split(jax.random.key(seed + 1), batch))
+    else:
+        robots = jax.tree.map(lambda x: jnp.broadcast_to(x, (batch,)), robot)
+    K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
+    return FlightSetup(ControllerConfig(), controller_params(), robots, K, altitude_gains(), flight_plan("waypoints"),
+                       keys)
+
+
+def _reached(t: np.ndarray, q: np.ndarray, plan, hold_steps: int, segment_steps: int) -> tuple[float, float]:
+    """Fraction of flights within `REACHED_M` of each waypoint at the end of its segment (``q`` ``(b, n, 6)``)."""
+    out = []
+    for w in range(2):
+        end = (hold_steps + (w + 1) * segment_steps) * DT
+        i = min(int(np.searchsorted(t, end - 1e-9)), len(t) - 1)
+        target = np.asarray(plan.waypoints[w])
+        out.append(float(np.mean(np.hypot(q[:, i, 2] - target[2], q[:, i, 3] - target[3]) < REACHED_M)))
+    return out[0], out[1]
+
+
+def _row(impl, batch, flight_s, timed_s, build_s, run_s, reached=(math.nan, math.nan), **extra) -> dict:
+    """A result row; throughputs are for whole ``flight_s`` flights, extrapolated from ``timed_s`` of each."""
+    run_per_flight_batch = run_s * flight_s / timed_s
+    steps = round(flight_s / DT)
+    row = dict(impl=impl, batch=batch, flight_s=flight_s, timed_s=timed_s, build_or_compile_s=build_s, run_s=run_s,
+               flights_per_s=batch / run_per_flight_batch,
+               sim_s_per_wall_s=batch * flight_s / run_per_flight_batch,
+               neuron_updates_per_s=N_NEURONS * steps * batch / run_per_flight_batch,
+               reached_q1=reached[0], reached_q2=reached[1])
+    row.update(extra)
+    return row
+
+
+# ----------------------------------------------------------------- spikejax
+
+
+def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, *, randomize_robots: bool = False,
+                         step_budget: int = STEP_BUDGET, repeats: int = 1) -> dict:
+    """``batch`` closed-loop flights of ``duration`` seconds as one ``jax.jit(jax.vmap(fly))``.
+
+    The program is compiled ahead (``lower(...).compile()``, ``build_or_compile_s``)
+    and run to completion ``repeats`` times (``run_s``: the fastest). If
+    ``batch`` whole flights exceed ``step_budget`` flight-steps, the flights
+    timed are shortened to fit it (same 20 % hold and two segments, at least
+    0.05 s) and the throughputs extrapolated to ``duration``: the scan's steps
+    all cost the same.
+
+    Args:
+        batch: flights flown at once, each with its own network seed.
+        duration: simulated seconds of one flight (2.5: the paper's hold and two 1 s legs).
+        seed: seed of the network keys (flight 0 is Brian2's network for the same seed).
+        randomize_robots: fly robots whose mass, drag and inertia differ by up to
+            +-20 % (`robots.robobee.params.randomize`), the teacher designed for
+            the nominal one.
+        step_budget: flight-steps one timed run may take.
+        repeats: timed runs.
+
+    Returns:
+        A row (`ROW_FIELDS`); ``reached_q1``/``reached_q2`` are the fractions of
+        flights within 5 mm of each waypoint at the end of its segment (NaN
+        when the flights were shortened), ``recording`` the flights'
+        `robots.robobee.flight.Recording` (NumPy).
+    """
+    setup = flight_setup(batch, seed, randomize_robots)
+    timed = duration
+    if batch * round(duration / DT) > step_budget:
+        blocks = max(step_budget // (batch * RECORD_EVERY), round(0.05 / DT) // RECORD_EVERY)
+        timed = blocks * RECORD_EVERY * DT
+    hold_steps, segment_steps = flight_steps(timed)
+    timed = (hold_steps + 2 * segment_steps) * DT
+
+    def one(robot, key):
+        return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, key, jnp.bool_(True),
+                   hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY)
+
+    fn = jax.jit(jax.vmap(one))
+    t0 = time.perf_counter()
+    compiled = fn.lower(setup.robots, setup.keys).compile()
+    compile_s = time.perf_counter() - t0
+    run_s = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        rec = jax.block_until_ready(compiled(setup.robots, setup.keys))
+        run_s = min(run_s, time.perf_counter() - t0)
+    rec = jax.tree.map(np.asarray, rec)
+    reached = (math.nan, math.nan)
+    if math.isclose(timed, duration, abs_tol=DT / 2):
+        reached = _reached(rec.t[0], rec.q, setup.plan, hold_steps, segment_steps)
+    impl = "spikejax jit(vmap(fly))" + (" randomized robots" if randomize_robots else "")
+    return _row(impl, batch, duration, timed, compile_s, run_s, reached, recording=rec)
+
+
+# ----------------------------------------------------------------- Brian2
+
+
+class Brian2Flight:
+    """One closed-loop flight in Brian2's runtime mode: the network in Brian2, the rest in a network operation.
+
+    The network is the one `init_controller` draws from ``key`` (the same
+    weights, connectivity and thresholds as the spikejax flight of that key);
+    the controller's constants are ``cparams``'s. The schedule and the network
+    operation are described in the module's notes.
+
+    Args:
+        key: the network's key.
+        hold_steps: steps the robot is held at ``q0`` (target ``q0``).
+        segment_steps: steps spent on each waypoint.
+        learn: apply Eq. (10) (the traces run either way), as `controller_step`'s ``learn``.
+        use_snn: the decoded output steers (else the teacher does, the SNN learning beside it).
+        robot: the flown robot (`default_params` if None); the teacher is designed for the nominal one.
+        record_every: the recording's sampling, as in `fly`.
+
+    Attributes:
+        net: the `brian2.Network`.
+        counts: spikes per neuron so far, input then hidden then output, ``(350,)``.
+    """
+
+    def __init__(self, key: jax.Array, hold_steps: int, segment_steps: int, *, learn: bool = True,
+                 use_snn: bool = True, robot=None, record_every: int = RECORD_EVERY):
+        import brian2 as b2
+
+        config, cp = ControllerConfig(), controller_params()
+        f = lambda x: float(np.asarray(x))  # noqa: E731
+        self.config = config
+        self.hold_steps, self.segment_steps, self.record_every = hold_steps, segment_steps, record_every
+        self.n_steps = hold_steps + 2 * segment_steps
+        self.learn, self.use_snn = learn, use_snn
+        state = jax.tree.map(lambda x: np.asarray(x, np.float64), init_controller(config, cp, key))
+        self.state0 = state
+        nominal = default_params()
+        self.robot = jax.tree.map(np.float64, nominal if robot is None else robot)
+        self.K = np.asarray(jnp.asarray(lateral_gain(nominal), jnp.float32), np.float64).reshape(4)
+        alt = jax.tree.map(f, altitude_gains())
+        self.kp, self.kd, self.cos_min = alt.kp, alt.kd, alt.cos_min
+        plan = flight_plan("waypoints")
+        self.targets = np.concatenate([np.asarray(plan.q0, np.float64)[None], np.asarray(plan.waypoints, np.float64)])
+        self.dt = f(cp.dt)
+        self.a, self.b = np.asarray(cp.a, np.float64), np.asarray(cp.b, np.float64)
+        self.input_gain = f(cp.input_gain)
+        self.alpha, self.gamma = f(cp.decoder.alpha), f(cp.decoder.gamma)
+        self.decoder_decay = math.exp(-f(cp.decoder.beta) * self.dt)
+        self.mu_h, self.mu_o, self.tau_r = f(cp.mu_hidden), f(cp.mu_output), f(cp.tau_reward)
+        self.w_min, self.w_max = f(cp.w_min), f(cp.w_max)
+        self.lift_max = float(max_lift(self.robot))
+        self.lat = np.asarray(LATERAL)
+        # Encoder: neuron n of the input layer reads variable n // n_per_input,
+        # with q_hat (first half of its group) or 1 - q_hat (second half).
+        n_per = config.n_per_input
+        self.group = np.repeat(np.arange(4), n_per)
+        self.antagonist = np.tile(np.arange(n_per) >= n_per // 2, 4)
+
+        b2.defaultclock.dt = self.dt * b2.second
+        eqs = """dv/dt = (I - v) / tau : 1 (unless refractory)
+        I : 1
+        v_th : 1 (constant)
+        tau : second (constant)"""
+        sizes = (config.n_input, config.n_hidden, config.n_output)
+        taus = (f(cp.tau_input), f(cp.tau_hidden), f(cp.tau_output))
+        thresholds = (state.v_th_input, state.v_th_hidden, state.v_th_output)
+        self.groups = []
+        for n, tau, v_th, name in zip(sizes, taus, thresholds, ("input", "hidden", "output")):
+            g = b2.NeuronGroup(n, eqs, threshold="v >= v_th", reset="v = 0", refractory=f(cp.t_ref) * b2.second,
+                               method="exact", name=f"robobee_{name}")
+            g.v_th = v_th
+            g.tau = tau * b2.second
+            self.groups.append(g)
+        self.synapses, self.pre_index = [], []
+        for (pre, post), mask, w, c in zip(zip(self.groups, self.groups[1:]), (state.mask_ih, state.mask_ho),
+                                           (state.w_ih, state.w_ho), (f(cp.syn_hidden), f(cp.syn_output))):
+            syn = b2.Synapses(pre, post, "w : 1", on_pre="I_post += c_syn * w", namespace={"c_syn": c})
+            i, j = np.nonzero(mask)
+            syn.connect(i=i, j=j)
+            syn.w = w[i, j]
+            self.synapses.append(syn)
+            self.pre_index.append(i)
+        # One slot, ordered as controller_step: each layer integrates, fires and
+        # resets before its spikes reach the next layer in the same step.
+        order = []
+        for g, syn in zip(self.groups, [*self.synapses, None]):
+            order += [g.state_updater, g.thresholder["spike"], g.resetter["spike"]]
+            if syn is not None:
+                order.append(syn.pre)
+        for k, obj in enumerate(order):
+            obj.when, obj.order = "groups", k
+        self.operation = b2.NetworkOperation(self._step, dt=self.dt * b2.second, when="end")
+        self.net = b2.Network(*self.groups, *self.synapses, self.operation)
+        self.net.store("start")
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the flight's start: the network as drawn (`brian2.Network.restore`), robot at ``q0``."""
+        self.net.restore("start")
+        n_in, n_h = self.config.n_input, self.config.n_hidden
+        self.k = 0
+        self.q = self.targets[0].copy()
+        self.trace = 0.0
+        self.since = [np.full(n_in, np.inf), np.full(n_h, np.inf)]
+        self.r = [np.zeros(n_in), np.zeros(n_h)]
+        self.counts = np.zeros(N_NEURONS, np.int64)
+        self.rec_q, self.rec_target, self.rec_y_hat, self.rec_y_lqr = [], [], [], []
+        self.op_s = 0.0
+        # Brian2's own arrays, written in place by the network operation.
+        self.w = [syn.variables["w"].get_value() for syn in self.synapses]
+        self.current = [g.variables["I"].get_value() for g in self.groups]
+        self._set_inputs()
+
+    def _target(self) -> np.ndarray:
+        k = self.k
+        segment = 0 if k < self.hold_steps else min(1 + (k - self.hold_steps) // self.segment_steps, 2)
+        return self.targets[segment]
+
+    def _set_inputs(self) -> None:
+        """The teacher and the input layer's currents for step ``k`` from the state ``q(t_k)``."""
+        self.target = self._target()
+        e = self.q[self.lat] - self.target[self.lat]
+        self.y_lqr = min(max(-float(self.K @ e) / TORQUE_UNIT, -1.0), 1.0)
+        q_hat = (self.a * (e + self.b))[self.group]
+        self.current[0][:] = self.input_gain * np.where(self.antagonist, 1.0 - q_hat, q_hat)
+        self.current[1][:] = 0.0
+        self.current[2][:] = 0.0
+
+    def _physics(self, lift: float, torque: float) -> None:
+        """One semi-implicit Euler step of `rhs` (MuJoCo's integrator) and the floor."""
+        f_lift, tau_c = clip_controls(self.robot, lift, torque)
+        q, dt = self.q, self.dt
+        qd = rhs(q, self.robot, f_lift, tau_c)
+        theta_dot, x_dot, z_dot = q[1] + dt * qd[1], q[4] + dt * qd[4], q[5] + dt * qd[5]
+        theta, x, z = q[0] + dt * theta_dot, q[2] + dt * x_dot, q[3] + dt * z_dot
+        if z < 0.0:
+            z, z_dot = 0.0, max(z_dot, 0.0)
+        self.q = np.array([theta, theta_dot, x, z, x_dot, z_dot])
+
+    def _step(self) -> None:
+        """The network operation at the end of step ``k``: decoder, rule, robot, next step's inputs."""
+        t0 = time.perf_counter()
+        spikes = [g.spikes for g in self.groups]
+        offset = 0
+        for s, g in zip(spikes, self.groups):
+            self.counts[offset + s] += 1
+            offset += len(g)
+        # Eq. (8): the output layer's spikes of this step, decayed over it.
+        self.trace = self.decoder_decay * (self.trace + len(spikes[2]))
+        y_hat = self.alpha * self.trace - self.gamma
+        sign = float(np.sign(self.y_lqr - y_hat))
+        # Eq. (9)-(10) for the input -> hidden and hidden -> output synapses.
+        for layer, (s, mu) in enumerate(zip(spikes[:2], (self.mu_h, self.mu_o))):
+            since = self.since[layer]
+            since += self.dt
+            since[s] = 0.0
+            r = self.r[layer]
+            r += sign
+            r *= np.exp(-since / self.tau_r)
+            if self.learn:
+                w = self.w[layer]
+                w += mu * r[self.pre_index[layer]]
+                np.clip(w, self.w_min, self.w_max, out=w)
+        if self.k % self.record_every == self.record_every - 1:
+            self.rec_q.append(self.q)
+            self.rec_target.append(self.target)
+            self.rec_y_hat.append(y_hat)
+            self.rec_y_lqr.append(self.y_lqr)
+        # The robot: the altitude controller's lift and the SNN's (or the teacher's) torque.
+        if self.k >= self.hold_steps:
+            q, target = self.q, self.target
+            accel = self.kp * (target[3] - q[3]) + self.kd * (target[5] - q[5])
+            lift = self.robot.mass * (self.robot.g + accel) / max(math.cos(q[0]), self.cos_min)
+            lift = min(max(lift, 0.0), self.lift_max)
+            y = min(max(y_hat, -1.0), 1.0) if self.use_snn else self.y_lqr
+            self._physics(lift, y * TORQUE_UNIT)
+        self.k += 1
+        self._set_inputs()
+        self.op_s += time.perf_counter() - t0
+
+    def run(self, n_steps: int) -> None:
+        """Runs ``n_steps`` steps from where the flight is."""
+        import brian2 as b2
+
+        self.net.run(n_steps * self.dt * b2.second)
+
+    def recording(self) -> dict:
+        """What was recorded every ``record_every`` steps: ``t``, ``q``, ``target``, ``y_hat``, ``y_lqr`` (as `fly`)."""
+        n = len(self.rec_q)
+        return dict(t=(np.arange(n) + 1) * self.record_every * self.dt, q=np.array(self.rec_q).reshape(n, 6),
+                    target=np.array(self.rec_target).reshape(n, 6), y_hat=np.array(self.rec_y_hat),
+                    y_lqr=np.array(self.rec_y_lqr))
+
+
+def run_brian2_closed_loop(duration: float = BRIAN2_S, seed: int = 0, target: str = "cython", *,
+                           flight_s: float = FLIGHT_S, scale_plan: bool = True, learn: bool = True,
+                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY) -> dict:
+    """One closed-loop flight in Brian2's runtime mode (`Brian2Flight`), timed on ``duration`` simulated seconds.
+
+    The network is spikejax's flight 0 of the same ``seed``. A first run of
+    ``warmup_steps`` steps generates (and for Cython compiles, or loads from
+    Cython's cache) the code: ``build_or_compile_s`` is the network's
+    construction plus that run. Then the flight restarts (`Brian2Flight.reset`)
+    and ``duration`` seconds are timed (``run_s``); flights/s is extrapolated to
+    a ``flight_s`` flight (Brian2's time per step is constant). If Cython cannot
+    compile, NumPy runs instead and ``impl`` says so.
+
+    Args:
+        duration: simulated seconds to run and time.
+        seed: network seed (as `run_spikejax_flights`).
+        target: ``"cython"`` or ``"numpy"`` (``brian2.prefs.codegen.target``).
+        flight_s: the flight length the throughputs are given for.
+        scale_plan: the plan (20 % hold, two segments) is scaled to ``duration``
+            (True), or is that of a ``flight_s`` flight, of which the first
+            ``duration`` seconds are flown (False: e.g. ``duration = 1.5`` flies
+            the hold and the first leg of a 2.5 s flight).
+        learn: apply Eq. (10).
+        use_snn: the SNN steers (else the teacher).
+        warmup_steps: steps of the code-generating first run.
+
+    Returns:
+        A row (`ROW_FIELDS`) with ``recording`` (`Brian2Flight.recording`),
+        ``counts`` (spikes per neuron), ``w_ih``/``w_ho`` (final weights, dense),
+        ``op_s`` (time in the network operation, within ``run_s``) and
+        ``reached_q1``/``reached_q2`` (within 5 mm at the end of a segment that was flown).
+    """
+    import brian2 as b2
+
+    hold_steps, segment_steps = flight_steps(duration if scale_plan else flight_s)
+    n_steps = round(duration / DT)
+    key = jax.random.split(jax.random.key(seed), 1)[0]
+    impl = f"Brian2 runtime ({target}) + network_operation"
+    old_target = b2.prefs.codegen.target
+    try:
+        b2.prefs.codegen.target = target
+        t0 = time.perf_counter()
+        try:
+            flight = Brian2Flight(key, hold_steps, segment_steps, learn=learn, use_snn=use_snn)
+            flight.run(warmup_steps)
+        except Exception as err:  # noqa: BLE001 - whatever broke the compiler: fall back, and say so
+            if target == "numpy":
+                raise
+            b2.prefs.codegen.target = "numpy"
+            impl = f"Brian2 runtime (numpy; {target} failed: {type(err).__name__}) + network_operation"
+            flight = Brian2Flight(key, hold_steps, segment_steps, learn=learn, use_snn=use_snn)
+            flight.run(warmup_steps)
+        build_s = time.perf_counter() - t0
+        flight.reset()
+        t0 = time.perf_counter()
+        flight.run(n_steps)
+        run_s = time.perf_counter() - t0
+    finally:
+        b2.prefs.codegen.target = old_target
+    rec = flight.recording()
+    reached = []
+    for w in range(2):
+        end_step = hold_steps + (w + 1) * segment_steps
+        if end_step > n_steps:
+            reached.append(math.nan)
+        else:
+            reached.append(_reached(rec["t"], rec["q"][None], flight_plan("waypoints"), hold_steps,
+                                    segment_steps)[w])
+    dense = []
+    for syn, mask in zip(flight.synapses, (flight.state0.mask_ih, flight.state0.mask_ho)):
+        w = np.zeros(mask.shape)
+        i, j = np.nonzero(mask)
+        w[i, j] = np.asarray(syn.w[:])
+        dense.append(w)
+    return _row(impl, 1, flight_s, n_steps * DT, build_s, run_s, reached, recording=rec, counts=flight.counts.copy(),
+                w_ih=dense[0], w_ho=dense[1], op_s=flight.op_s)
+
+
+# ----------------------------------------------------------------- CLI
+
+
+def _batches(trials) -> tuple[int, ...]:
+    """`BATCHES` up to ``trials`` (and ``trials`` itself), or all of them."""
+    if not trials:
+        return BATCHES
+    return tuple(sorted({b for b in BATCHES if b <= trials} | {int(trials)}))
+
+
+def main(args: argparse.Namespace) -> int:
+    """``spikejax bench robobee``: the closed-loop table, then the network-alone table.
+
+    Reads from ``args`` (each optional): ``trials`` (the largest batch of
+    flights; default: every batch of `BATCHES`), ``out`` (a directory for
+    ``bench_robobee.csv``, and ``bench_robobee_network.csv`` from the network
+    table), ``duration`` (simulated seconds of a spikejax flight, default 2.5),
+    ``seed`` (default 0), ``repeats`` (timed spikejax runs per row, the fastest
+    kept; default 1), ``randomize`` (also fly randomized robots at the largest
+    batch) and ``network`` (False skips the network-alone table). Brian2 runs
+    in a fresh process of its own (`bench_network._isolated`).
+    """
+    duration = float(getattr(args, "duration", None) or FLIGHT_S)
+    seed = int(getattr(args, "seed", None) or 0)
+    repeats = int(getattr(args, "repeats", None) or 1)
+    batches = _batches(getattr(args, "trials", None))
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+          f"{jax.device_count()} x {jax.devices()[0].platform}, jax {jax.__version__}")
+    hold, segment = flight_steps(duration)
+    print(f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "
+          f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
+          f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
+    rows = []
+    try:
+        rows.append(bench_network._isolated(run_brian2_closed_loop, BRIAN2_S, seed, flight_s=duration))
+    except ImportError as err:
+        print(f"  skipped Brian2: {err}")
+    runs = [dict(batch=b) for b in batches]
+    if getattr(args, "randomize", False):
+        runs.append(dict(batch=max(batches), randomize_robots=True))
+    for kw in runs:
+        rows.append(run_spikejax_flights(duration=duration, seed=seed, repeats=repeats, **kw))
+    brian2 = next((r["flights_per_s"] for r in rows if r["impl"].startswith("Brian2")), math.nan)
+    for r in rows:
+        r["x_brian2"] = r["flights_per_s"] / brian2
+        extra = f", of which network_operation {r['op_s']:.2f} s" if "op_s" in r else ""
+        print(f"  {r['impl']}, batch {r['batch']}: timed {r['timed_s']:g} s per flight, run {r['run_s']:.2f} s"
+              f"{extra}", flush=True)
+    print()
+    print("| implementation | batch | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
+          "simulated s / s | neuron updates/s | x Brian2 | reached q1, q2 |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        reached = "-" if math.isnan(r["reached_q1"]) else f"{r['reached_q1']:.0%}, {r['reached_q2']:.0%}"
+        print(f"| {r['impl']} | {r['batch']} | {r['build_or_compile_s']:.2f} | {r['timed_s'] * r['batch']:g} | "
+              f"{r['run_s']:.2f} | {r['flights_per_s']:.4g} | {r['sim_s_per_wall_s']:.3g} | "
+              f"{r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | {reached} |")
+    print(f"(flights of {duration:g} s; timed: simulated seconds actually run (flights x timed length), the "
+          "throughputs extrapolated from them; run: the fastest of "
+          f"{repeats}; reached: within {REACHED_M * 1e3:g} mm of each waypoint at the end of its leg)")
+    if getattr(args, "out", None):
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        with open(out / "bench_robobee.csv", "w", newline="") as file:
+            writer = csv.DictWriter(file, fieldnames=[*ROW_FIELDS, "x_brian2"], extrasaction="ignore")
+            writer.writeheader()
+            writer.writerows(rows)
+    if getattr(args, "network", True) is not False:
+        print()
+        bench_network.main_network(argparse.Namespace(out=getattr(args, "out", None)))
+    return 0
