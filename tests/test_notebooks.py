@@ -20,3 +20,14 @@ def test_gaits_notebook_executes(tmp_path, monkeypatch):
     assert not [o for o in outputs if o.output_type == "error"]
     assert sum(o.output_type == "display_data" for o in outputs) >= 3  # rasters, weights, errors
     assert (tmp_path / "gaits" / "gait_convergence.csv").exists()
+
+
+def test_robobee_notebook_executes(monkeypatch):
+    monkeypatch.setenv("SPIKEJAX_NB_FLIGHTS", "4")
+    nb = nbformat.read(NOTEBOOKS / "robobee.ipynb", as_version=4)
+    nbclient.NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+    outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    assert sum(o.output_type == "display_data" for o in outputs) >= 2
+    text = "".join(o.get("text", "") for o in outputs)
+    assert "of 4 randomised robots reached both waypoints" in text

@@ -23,7 +23,7 @@ def _recording(dist_1, dist_2, theta_max=0.3):
     q = q.at[4, 0].set(theta_max)
     y_lqr = jnp.zeros(n)
     y_hat = jnp.where(jnp.arange(n) >= 2, 0.5, 7.0)  # the hold's samples do not count
-    return Recording(t=t, q=q, target=target, y_hat=y_hat, y_lqr=y_lqr), plan
+    return Recording(t=t, q=q, target=target, y_hat=y_hat, y_lqr=y_lqr, w_ih_mean=y_lqr, w_ho_mean=y_lqr), plan
 
 
 def test_summary_hand_computed():

@@ -63,6 +63,8 @@ class Recording(NamedTuple):
         target: target state, shape (n, 6).
         y_hat: decoded SNN output, units of ``TORQUE_UNIT``, shape (n,).
         y_lqr: the teacher, same units, shape (n,).
+        w_ih_mean: mean input->hidden weight over existing synapses, shape (n,).
+        w_ho_mean: mean hidden->output weight over existing synapses, shape (n,).
     """
 
     t: jax.Array
@@ -70,6 +72,8 @@ class Recording(NamedTuple):
     target: jax.Array
     y_hat: jax.Array
     y_lqr: jax.Array
+    w_ih_mean: jax.Array
+    w_ho_mean: jax.Array
 
 
 def flight_plan(name: str) -> FlightPlan:
@@ -141,10 +145,13 @@ def fly(
 
     def record(carry, block):
         carry, (q, target, y_hat, y_lqr) = jax.lax.scan(step, carry, block)
-        return carry, (q[-1], target[-1], y_hat[-1], y_lqr[-1])
+        ctrl = carry[1]
+        w_ih = jnp.sum(ctrl.w_ih) / jnp.sum(ctrl.mask_ih)
+        w_ho = jnp.sum(ctrl.w_ho) / jnp.sum(ctrl.mask_ho)
+        return carry, (q[-1], target[-1], y_hat[-1], y_lqr[-1], w_ih, w_ho)
 
     carry = (data_at(model, plan.q0), init_controller(config, cparams, key))
     blocks = jnp.arange(n_steps).reshape(-1, record_every)
-    _, (q, target, y_hat, y_lqr) = jax.lax.scan(record, carry, blocks)
+    _, (q, target, y_hat, y_lqr, w_ih, w_ho) = jax.lax.scan(record, carry, blocks)
     t = (blocks[:, -1] + 1) * dt
-    return Recording(t=t, q=q, target=target, y_hat=y_hat, y_lqr=y_lqr)
+    return Recording(t=t, q=q, target=target, y_hat=y_hat, y_lqr=y_lqr, w_ih_mean=w_ih, w_ho_mean=w_ho)
