@@ -23,6 +23,7 @@ REPRODUCTIONS = {
 BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",
     "robobee-network": "robots.robobee.bench_network:main_network",
+    "robobee": "robots.robobee.bench:main",
 }
 
 

@@ -39,13 +39,14 @@ Notes:
        the hidden layer integrates that current over the step, tests and
        resets; the same for hidden -> output (``syn_output``).
     3. The network operation (Python, NumPy) reads the three layers' spikes of
-       the step (``NeuronGroup.spikes``), updates the decoder of Eq. (8), the
+       the step (each group's ``_spikespace``, as ``NeuronGroup.spikes``
+       reads it), updates the decoder of Eq. (8), the
        traces of Eq. (9) and, by Eq. (10), the weights of both synapse sets
        in place in Brian2's own arrays (clipped to ``[w_min, w_max]``);
        applies the lift of the altitude controller and the decoded torque to
-       the robot, one semi-implicit Euler step of
-       `robots.robobee.dynamics.rhs` (MuJoCo's integrator, so the same
-       arithmetic as the MJX step of `robots.robobee.physics`, in float64;
+       the robot, one semi-implicit Euler step (MuJoCo's integrator, so the
+       arithmetic of the MJX step of `robots.robobee.physics`) of Eq. (4)-(5),
+       `robots.robobee.dynamics.rhs` written out in scalar Python (float64;
        held at ``q0`` during the hold); then computes the next step's target,
        LQR teacher and encoder currents (antagonist halves as in
        `controller_step`) and writes them into the input layer, and zeroes
@@ -54,7 +55,19 @@ Notes:
     That is the algorithm of `robots.robobee.flight.fly` step for step;
     Brian2 computes in float64 and spikejax in float32, so the spike trains
     part where float32 rounding decides a threshold test, and from there the
-    two learning networks drift apart like two seeds.
+    two learning networks drift apart like two seeds (over the first 50 ms of
+    a scaled flight they give the same outputs, ``tests/test_robobee_bench.py``).
+
+    Where the time goes, measured on a 2-core CPU (one run, so rough): Brian2
+    takes about 85 us per step, a little over half of it in the network
+    operation, and one ``Network.run`` costs about 0.16 s of preparation (so a
+    flight is timed whole: a 0.2 s run extrapolated would understate Brian2
+    twofold). spikejax is fastest at about 64 flights (about 5 us per
+    flight-step, four fifths of it the SNN with its plasticity, the rest the
+    MJX step); beyond that the flights' weights (each flight has its own two
+    learned matrices, 25,000 weights and their masks, read and rewritten every
+    step) leave the 32 MB L3 cache and the step becomes bound by memory
+    bandwidth, about 13 us per flight-step whatever the batch.
 """
 
 from __future__ import annotations
@@ -77,9 +90,6 @@ from robots.robobee.controller import TORQUE_UNIT
 from robots.robobee.controller import ControllerConfig
 from robots.robobee.controller import controller_params
 from robots.robobee.controller import init_controller
-from robots.robobee.dynamics import LATERAL
-from robots.robobee.dynamics import clip_controls
-from robots.robobee.dynamics import rhs
 from robots.robobee.flight import flight_plan
 from robots.robobee.flight import fly
 from robots.robobee.lqr import altitude_gains
@@ -95,27 +105,40 @@ __all__ = [
     "flight_setup",
     "flight_steps",
     "main",
+    "network_key",
     "run_brian2_closed_loop",
     "run_spikejax_flights",
+    "timed_duration",
 ]
 
 DT = 1e-4  # s, the neural and physics step
 FLIGHT_S = 2.5  # s: hold 0.5 s + 2 x 1 s, the paper's first flight
 HOLD_FRACTION = 0.2
 RECORD_EVERY = 10
-BATCHES = (1, 16, 256, 1024, 4096)
+# 64: about where the batch's weights (200 KB per flight) stop fitting in a 32 MB L3 cache.
+BATCHES = (1, 16, 64, 256, 1024, 4096)
 # Flight-steps (flights x steps) one timed spikejax run may take: a batch whose
 # whole flights would exceed it flies shorter flights and its flights/s is
 # extrapolated to the full flight (every step costs the same, hold included).
 STEP_BUDGET = 256 * 25_000
-# Simulated seconds Brian2 is timed on (about 1.5 ms of wall time per step).
-BRIAN2_S = 0.2
 # Distance (x, z) to a waypoint at the end of its segment that counts as reached, m.
 REACHED_M = 5e-3
 N_NEURONS = 350
 
 ROW_FIELDS = ("impl", "batch", "flight_s", "timed_s", "build_or_compile_s", "run_s", "flights_per_s",
               "sim_s_per_wall_s", "neuron_updates_per_s", "reached_q1", "reached_q2")
+
+
+def timed_duration(batch: int, duration: float, step_budget: int = STEP_BUDGET) -> float:
+    """Seconds of each of ``batch`` flights to time: ``duration``, or shorter (at least 0.05 s) to fit ``step_budget``.
+
+    The result is a whole number of `flight_steps` blocks.
+    """
+    steps = round(duration / DT)
+    if batch * steps > step_budget:
+        steps = max(step_budget // batch, round(0.05 / DT))
+    hold, segment = flight_steps(steps * DT)
+    return (hold + 2 * segment) * DT
 
 
 def flight_steps(duration: float, record_every: int = RECORD_EVERY) -> tuple[int, int]:
@@ -156,10 +179,18 @@ class FlightSetup(NamedTuple):
     keys: jax.Array
 
 
+def network_key(seed, flight) -> jax.Array:
+    """The network key of flight ``flight`` for ``seed``, whatever the batch size."""
+    return jax.random.fold_in(jax.random.key(seed), flight)
+
+
 def flight_setup(batch: int, seed: int, randomize_robots: bool = False) -> FlightSetup:
-    """The batch's setup for ``seed``: network keys ``split(key(seed), batch)``, robots nominal or randomized."""
+    """The batch's setup for ``seed``: flight ``b`` has the network of `network_key` ``(seed, b)``.
+
+    The robots are the nominal one, or drawn by `randomize` from ``key(seed + 1)``.
+    """
     robot = default_params()
-    keys = jax.random.split(jax.random.key(seed), batch)
+    keys = jax.vmap(network_key, in_axes=(None, 0))(seed, jnp.arange(batch))
     if randomize_robots:
         robots = jax.vmap(randomize, in_axes=(None, 0))(robot, jax.random.split(jax.random.key(seed + 1), batch))
     else:
@@ -224,12 +255,8 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
         `robots.robobee.flight.Recording` (NumPy).
     """
     setup = flight_setup(batch, seed, randomize_robots)
-    timed = duration
-    if batch * round(duration / DT) > step_budget:
-        blocks = max(step_budget // (batch * RECORD_EVERY), round(0.05 / DT) // RECORD_EVERY)
-        timed = blocks * RECORD_EVERY * DT
+    timed = timed_duration(batch, duration, step_budget)
     hold_steps, segment_steps = flight_steps(timed)
-    timed = (hold_steps + 2 * segment_steps) * DT
 
     def one(robot, key):
         return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, key, jnp.bool_(True),
@@ -304,12 +331,21 @@ class Brian2Flight:
         self.mu_h, self.mu_o, self.tau_r = f(cp.mu_hidden), f(cp.mu_output), f(cp.tau_reward)
         self.w_min, self.w_max = f(cp.w_min), f(cp.w_max)
         self.lift_max = float(max_lift(self.robot))
-        self.lat = np.asarray(LATERAL)
-        # Encoder: neuron n of the input layer reads variable n // n_per_input,
-        # with q_hat (first half of its group) or 1 - q_hat (second half).
+        self.robot_py = {name: float(x) for name, x in self.robot._asdict().items()}
+        self.K_py = tuple(float(x) for x in self.K)
+        self.targets_py = [tuple(float(x) for x in t) for t in self.targets]
+        self.minus_inv_tau_r = -1.0 / self.tau_r
+        self.n_input, self.n_hidden = config.n_input, config.n_hidden
+        # Encoder: input neuron n reads the lateral error e_g of its group g = n // n_per_input
+        # as input_gain * q_hat_g (first half) or input_gain * (1 - q_hat_g) (second half),
+        # q_hat = a (e + b), that is offset_n + slope_n e_g.
         n_per = config.n_per_input
         self.group = np.repeat(np.arange(4), n_per)
-        self.antagonist = np.tile(np.arange(n_per) >= n_per // 2, 4)
+        antagonist = np.tile(np.arange(n_per) >= n_per // 2, 4)
+        a, b = self.a[self.group], self.b[self.group]
+        self.slope = np.where(antagonist, -1.0, 1.0) * self.input_gain * a
+        self.offset = self.input_gain * np.where(antagonist, 1.0 - a * b, a * b)
+        self.e = np.zeros(4)
 
         b2.defaultclock.dt = self.dt * b2.second
         eqs = """dv/dt = (I - v) / tau : 1 (unless refractory)
@@ -322,7 +358,7 @@ class Brian2Flight:
         self.groups = []
         for n, tau, v_th, name in zip(sizes, taus, thresholds, ("input", "hidden", "output")):
             g = b2.NeuronGroup(n, eqs, threshold="v >= v_th", reset="v = 0", refractory=f(cp.t_ref) * b2.second,
-                               method="exact", name=f"robobee_{name}")
+                               method="exact", name=f"robobee_{name}*")
             g.v_th = v_th
             g.tau = tau * b2.second
             self.groups.append(g)
@@ -335,6 +371,8 @@ class Brian2Flight:
             syn.w = w[i, j]
             self.synapses.append(syn)
             self.pre_index.append(i)
+        # Row of each synapse's presynaptic neuron in the rule's traces (input neurons, then hidden ones).
+        self.pre_rows = [self.pre_index[0], config.n_input + self.pre_index[1]]
         # One slot, ordered as controller_step: each layer integrates, fires and
         # resets before its spikes reach the next layer in the same step.
         order = []
@@ -354,79 +392,92 @@ class Brian2Flight:
         self.net.restore("start")
         n_in, n_h = self.config.n_input, self.config.n_hidden
         self.k = 0
-        self.q = self.targets[0].copy()
+        self.q = tuple(float(x) for x in self.targets[0])
         self.trace = 0.0
-        self.since = [np.full(n_in, np.inf), np.full(n_h, np.inf)]
-        self.r = [np.zeros(n_in), np.zeros(n_h)]
+        # Eq. (9) for the input neurons, then the hidden ones: time since the last spike and reward trace.
+        self.since = np.full(n_in + n_h, np.inf)
+        self.r = np.zeros(n_in + n_h)
         self.counts = np.zeros(N_NEURONS, np.int64)
-        self.rec_q, self.rec_target, self.rec_y_hat, self.rec_y_lqr = [], [], [], []
+        self.records = []
         self.op_s = 0.0
-        # Brian2's own arrays, written in place by the network operation.
+        # Brian2's own arrays, read and written in place by the network operation.
         self.w = [syn.variables["w"].get_value() for syn in self.synapses]
         self.current = [g.variables["I"].get_value() for g in self.groups]
+        self.spikespace = [g.variables["_spikespace"].get_value() for g in self.groups]
         self._set_inputs()
 
-    def _target(self) -> np.ndarray:
+    def _set_inputs(self) -> None:
+        """The target, the teacher and the input layer's currents for step ``k`` from the state ``q(t_k)``."""
         k = self.k
         segment = 0 if k < self.hold_steps else min(1 + (k - self.hold_steps) // self.segment_steps, 2)
-        return self.targets[segment]
-
-    def _set_inputs(self) -> None:
-        """The teacher and the input layer's currents for step ``k`` from the state ``q(t_k)``."""
-        self.target = self._target()
-        e = self.q[self.lat] - self.target[self.lat]
-        self.y_lqr = min(max(-float(self.K @ e) / TORQUE_UNIT, -1.0), 1.0)
-        q_hat = (self.a * (e + self.b))[self.group]
-        self.current[0][:] = self.input_gain * np.where(self.antagonist, 1.0 - q_hat, q_hat)
-        self.current[1][:] = 0.0
-        self.current[2][:] = 0.0
+        self.target = target = self.targets_py[segment]
+        q = self.q
+        e = self.e
+        e[0], e[1], e[2], e[3] = q[0] - target[0], q[1] - target[1], q[2] - target[2], q[4] - target[4]
+        K = self.K_py
+        y = -(K[0] * e[0] + K[1] * e[1] + K[2] * e[2] + K[3] * e[3]) / TORQUE_UNIT
+        self.y_lqr = min(max(y, -1.0), 1.0)
+        # input_gain * q_hat or input_gain * (1 - q_hat), q_hat = a (e + b): an affine function of e.
+        current = self.current[0]
+        np.take(e, self.group, out=current)
+        current *= self.slope
+        current += self.offset
+        self.current[1].fill(0.0)
+        self.current[2].fill(0.0)
 
     def _physics(self, lift: float, torque: float) -> None:
-        """One semi-implicit Euler step of `rhs` (MuJoCo's integrator) and the floor."""
-        f_lift, tau_c = clip_controls(self.robot, lift, torque)
-        q, dt = self.q, self.dt
-        qd = rhs(q, self.robot, f_lift, tau_c)
-        theta_dot, x_dot, z_dot = q[1] + dt * qd[1], q[4] + dt * qd[4], q[5] + dt * qd[5]
-        theta, x, z = q[0] + dt * theta_dot, q[2] + dt * x_dot, q[3] + dt * z_dot
+        """One semi-implicit Euler step (MuJoCo's integrator) of Eq. (4)-(5) (`rhs`), then the floor.
+
+        The clipping of `clip_controls` and the dynamics of `rhs` in scalar
+        Python (``tests/test_robobee_bench.py`` checks them against both).
+        """
+        p, dt = self.robot_py, self.dt
+        f_lift = min(max(lift, 0.0), self.lift_max)
+        tau_c = min(max(torque, -p["torque_limit"]), p["torque_limit"])
+        theta, theta_dot, x, z, x_dot, z_dot = self.q
+        c, s = math.cos(theta), math.sin(theta)
+        f_d = -p["b_w"] * (x_dot * c - z_dot * s + p["r_w"] * theta_dot)
+        x_ddot = (f_lift * s + f_d * c) / p["mass"]
+        z_ddot = (f_lift * c - f_d * s) / p["mass"] - p["g"]
+        theta_ddot = (tau_c + p["r_w"] * f_d) / p["inertia_y"]
+        theta_dot, x_dot, z_dot = theta_dot + dt * theta_ddot, x_dot + dt * x_ddot, z_dot + dt * z_ddot
+        theta, x, z = theta + dt * theta_dot, x + dt * x_dot, z + dt * z_dot
         if z < 0.0:
             z, z_dot = 0.0, max(z_dot, 0.0)
-        self.q = np.array([theta, theta_dot, x, z, x_dot, z_dot])
+        self.q = (theta, theta_dot, x, z, x_dot, z_dot)
 
     def _step(self) -> None:
         """The network operation at the end of step ``k``: decoder, rule, robot, next step's inputs."""
         t0 = time.perf_counter()
-        spikes = [g.spikes for g in self.groups]
-        offset = 0
-        for s, g in zip(spikes, self.groups):
-            self.counts[offset + s] += 1
-            offset += len(g)
+        s_in, s_h, s_out = (ss[: ss[-1]] for ss in self.spikespace)
+        counts = self.counts
+        counts[s_in] += 1
+        counts[self.n_input + s_h] += 1
+        counts[self.n_input + self.n_hidden + s_out] += 1
         # Eq. (8): the output layer's spikes of this step, decayed over it.
-        self.trace = self.decoder_decay * (self.trace + len(spikes[2]))
+        self.trace = self.decoder_decay * (self.trace + len(s_out))
         y_hat = self.alpha * self.trace - self.gamma
-        sign = float(np.sign(self.y_lqr - y_hat))
-        # Eq. (9)-(10) for the input -> hidden and hidden -> output synapses.
-        for layer, (s, mu) in enumerate(zip(spikes[:2], (self.mu_h, self.mu_o))):
-            since = self.since[layer]
-            since += self.dt
-            since[s] = 0.0
-            r = self.r[layer]
-            r += sign
-            r *= np.exp(-since / self.tau_r)
-            if self.learn:
-                w = self.w[layer]
-                w += mu * r[self.pre_index[layer]]
+        error = self.y_lqr - y_hat
+        sign = 1.0 if error > 0 else (-1.0 if error < 0 else 0.0)
+        # Eq. (9) for the input and hidden neurons (the presynaptic ones), then
+        # Eq. (10) for the input -> hidden and hidden -> output synapses.
+        since, r = self.since, self.r
+        since += self.dt
+        since[s_in] = 0.0
+        since[self.n_input + s_h] = 0.0
+        r += sign
+        r *= np.exp(since * self.minus_inv_tau_r)
+        if self.learn:
+            for w, pre, mu in zip(self.w, self.pre_rows, (self.mu_h, self.mu_o)):
+                w += mu * r[pre]
                 np.clip(w, self.w_min, self.w_max, out=w)
         if self.k % self.record_every == self.record_every - 1:
-            self.rec_q.append(self.q)
-            self.rec_target.append(self.target)
-            self.rec_y_hat.append(y_hat)
-            self.rec_y_lqr.append(self.y_lqr)
+            self.records.append((*self.q, *self.target, y_hat, self.y_lqr))
         # The robot: the altitude controller's lift and the SNN's (or the teacher's) torque.
         if self.k >= self.hold_steps:
             q, target = self.q, self.target
             accel = self.kp * (target[3] - q[3]) + self.kd * (target[5] - q[5])
-            lift = self.robot.mass * (self.robot.g + accel) / max(math.cos(q[0]), self.cos_min)
-            lift = min(max(lift, 0.0), self.lift_max)
+            lift = self.robot_py["mass"] * (self.robot_py["g"] + accel) / max(math.cos(q[0]), self.cos_min)
             y = min(max(y_hat, -1.0), 1.0) if self.use_snn else self.y_lqr
             self._physics(lift, y * TORQUE_UNIT)
         self.k += 1
@@ -441,13 +492,13 @@ class Brian2Flight:
 
     def recording(self) -> dict:
         """What was recorded every ``record_every`` steps: ``t``, ``q``, ``target``, ``y_hat``, ``y_lqr`` (as `fly`)."""
-        n = len(self.rec_q)
-        return dict(t=(np.arange(n) + 1) * self.record_every * self.dt, q=np.array(self.rec_q).reshape(n, 6),
-                    target=np.array(self.rec_target).reshape(n, 6), y_hat=np.array(self.rec_y_hat),
-                    y_lqr=np.array(self.rec_y_lqr))
+        rec = np.array(self.records, np.float64).reshape(-1, 14)
+        n = len(rec)
+        return dict(t=(np.arange(n) + 1) * self.record_every * self.dt, q=rec[:, :6], target=rec[:, 6:12],
+                    y_hat=rec[:, 12], y_lqr=rec[:, 13])
 
 
-def run_brian2_closed_loop(duration: float = BRIAN2_S, seed: int = 0, target: str = "cython", *,
+def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
                            flight_s: float = FLIGHT_S, scale_plan: bool = True, learn: bool = True,
                            use_snn: bool = True, warmup_steps: int = RECORD_EVERY) -> dict:
     """One closed-loop flight in Brian2's runtime mode (`Brian2Flight`), timed on ``duration`` simulated seconds.
@@ -456,9 +507,11 @@ def run_brian2_closed_loop(duration: float = BRIAN2_S, seed: int = 0, target: st
     ``warmup_steps`` steps generates (and for Cython compiles, or loads from
     Cython's cache) the code: ``build_or_compile_s`` is the network's
     construction plus that run. Then the flight restarts (`Brian2Flight.reset`)
-    and ``duration`` seconds are timed (``run_s``); flights/s is extrapolated to
-    a ``flight_s`` flight (Brian2's time per step is constant). If Cython cannot
-    compile, NumPy runs instead and ``impl`` says so.
+    and ``duration`` seconds are timed (``run_s``, one ``Network.run``, its
+    preparation included: ``prepare_s``, the time of a further run of
+    ``warmup_steps``, measures that); flights/s is extrapolated to a
+    ``flight_s`` flight if ``duration`` is shorter (Brian2's time per step is
+    constant). If Cython cannot compile, NumPy runs instead and ``impl`` says so.
 
     Args:
         duration: simulated seconds to run and time.
@@ -483,7 +536,7 @@ def run_brian2_closed_loop(duration: float = BRIAN2_S, seed: int = 0, target: st
 
     hold_steps, segment_steps = flight_steps(duration if scale_plan else flight_s)
     n_steps = round(duration / DT)
-    key = jax.random.split(jax.random.key(seed), 1)[0]
+    key = network_key(seed, 0)
     impl = f"Brian2 runtime ({target}) + network_operation"
     old_target = b2.prefs.codegen.target
     try:
@@ -504,9 +557,15 @@ def run_brian2_closed_loop(duration: float = BRIAN2_S, seed: int = 0, target: st
         t0 = time.perf_counter()
         flight.run(n_steps)
         run_s = time.perf_counter() - t0
+        weights = [np.asarray(syn.w[:]) for syn in flight.synapses]
+        result = flight.recording(), flight.counts.copy(), flight.op_s, weights
+        flight.reset()
+        t0 = time.perf_counter()
+        flight.run(warmup_steps)
+        prepare_s = time.perf_counter() - t0
     finally:
         b2.prefs.codegen.target = old_target
-    rec = flight.recording()
+    rec, counts, op_s, weights = result
     reached = []
     for w in range(2):
         end_step = hold_steps + (w + 1) * segment_steps
@@ -516,13 +575,12 @@ def run_brian2_closed_loop(duration: float = BRIAN2_S, seed: int = 0, target: st
             reached.append(_reached(rec["t"], rec["q"][None], flight_plan("waypoints"), hold_steps,
                                     segment_steps)[w])
     dense = []
-    for syn, mask in zip(flight.synapses, (flight.state0.mask_ih, flight.state0.mask_ho)):
+    for w_syn, mask in zip(weights, (flight.state0.mask_ih, flight.state0.mask_ho)):
         w = np.zeros(mask.shape)
-        i, j = np.nonzero(mask)
-        w[i, j] = np.asarray(syn.w[:])
+        w[np.nonzero(mask)] = w_syn
         dense.append(w)
-    return _row(impl, 1, flight_s, n_steps * DT, build_s, run_s, reached, recording=rec, counts=flight.counts.copy(),
-                w_ih=dense[0], w_ho=dense[1], op_s=flight.op_s)
+    return _row(impl, 1, flight_s, n_steps * DT, build_s, run_s, reached, recording=rec, counts=counts,
+                w_ih=dense[0], w_ho=dense[1], op_s=op_s, prepare_s=prepare_s)
 
 
 # ----------------------------------------------------------------- CLI
@@ -544,8 +602,10 @@ def main(args: argparse.Namespace) -> int:
     table), ``duration`` (simulated seconds of a spikejax flight, default 2.5),
     ``seed`` (default 0), ``repeats`` (timed spikejax runs per row, the fastest
     kept; default 1), ``randomize`` (also fly randomized robots at the largest
-    batch) and ``network`` (False skips the network-alone table). Brian2 runs
-    in a fresh process of its own (`bench_network._isolated`).
+    batch), ``brian2_target`` (``"cython"``, the default, or ``"numpy"``) and
+    ``network`` (False skips the network-alone table). Brian2 runs in a fresh
+    process of its own (`bench_network._isolated`), one flight on one core;
+    spikejax's batch uses every core XLA gives it.
     """
     duration = float(getattr(args, "duration", None) or FLIGHT_S)
     seed = int(getattr(args, "seed", None) or 0)
@@ -557,22 +617,26 @@ def main(args: argparse.Namespace) -> int:
     print(f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "
           f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
           f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
-    rows = []
-    try:
-        rows.append(bench_network._isolated(run_brian2_closed_loop, BRIAN2_S, seed, flight_s=duration))
-    except ImportError as err:
-        print(f"  skipped Brian2: {err}")
-    runs = [dict(batch=b) for b in batches]
+    brian2_target = getattr(args, "brian2_target", None) or "cython"
+    runs = [lambda: bench_network._isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration)]
+    runs += [lambda b=b: run_spikejax_flights(b, duration, seed, repeats=repeats) for b in batches]
     if getattr(args, "randomize", False):
-        runs.append(dict(batch=max(batches), randomize_robots=True))
-    for kw in runs:
-        rows.append(run_spikejax_flights(duration=duration, seed=seed, repeats=repeats, **kw))
+        runs.append(lambda: run_spikejax_flights(max(batches), duration, seed, randomize_robots=True, repeats=repeats))
+    rows = []
+    for run in runs:
+        try:
+            r = run()
+        except ImportError as err:
+            print(f"  skipped: {err}")
+            continue
+        rows.append(r)
+        extra = (f", of which network_operation {r['op_s']:.2f} s and Network.run's preparation about "
+                 f"{r['prepare_s']:.2f} s" if "op_s" in r else "")
+        print(f"  {r['impl']}, batch {r['batch']}: {r['flights_per_s']:.3g} flights/s (timed {r['timed_s']:g} s "
+              f"per flight, run {r['run_s']:.2f} s{extra})", flush=True)
     brian2 = next((r["flights_per_s"] for r in rows if r["impl"].startswith("Brian2")), math.nan)
     for r in rows:
         r["x_brian2"] = r["flights_per_s"] / brian2
-        extra = f", of which network_operation {r['op_s']:.2f} s" if "op_s" in r else ""
-        print(f"  {r['impl']}, batch {r['batch']}: timed {r['timed_s']:g} s per flight, run {r['run_s']:.2f} s"
-              f"{extra}", flush=True)
     print()
     print("| implementation | batch | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
           "simulated s / s | neuron updates/s | x Brian2 | reached q1, q2 |")
@@ -584,7 +648,8 @@ def main(args: argparse.Namespace) -> int:
               f"{r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | {reached} |")
     print(f"(flights of {duration:g} s; timed: simulated seconds actually run (flights x timed length), the "
           "throughputs extrapolated from them; run: the fastest of "
-          f"{repeats}; reached: within {REACHED_M * 1e3:g} mm of each waypoint at the end of its leg)")
+          f"{repeats}; reached: within {REACHED_M * 1e3:g} mm of each waypoint at the end of its leg; Brian2 flies "
+          "one flight on one core)")
     if getattr(args, "out", None):
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
