@@ -20,18 +20,15 @@ factor, the initial weight range and the update scale.
 from __future__ import annotations
 
 import argparse
-import csv
 import tomllib
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from spikejax.errors import UserError
 from spikejax.stats import wilson_interval
-from spikejax.sweep import load_sweep, read_results, run_sweep
+from robots.common import SWEEPS, run_named_sweep, write_csv
 
-SWEEPS = Path(__file__).resolve().parents[2] / "sweeps"
 
 # Fig. 4 and Sec. III-C: "> 80 %" for one and two gaits, "~ 20 %" for three (100 trials each).
 PAPER = {1: (0.80, ">"), 2: (0.80, ">"), 3: (0.20, "~")}
@@ -40,27 +37,9 @@ BUDGETS = (30, 45, 60, 90, 120, 150, 180, 240, 300, 450, 600)
 PAPER_LIKE_BUDGET = 150
 
 
-def _run(name: str, out: Path, args: argparse.Namespace) -> dict[str, np.ndarray]:
-    path = SWEEPS / f"{name}.toml"
-    if not path.exists():
-        raise UserError(f"sweep file {path} not found (install spikejax from its source tree: pip install -e .)")
-    spec = load_sweep(path, seeds=args.trials, chunk_size=args.chunk_size)
-    run_sweep(spec, out / "sweeps" / name, progress=not args.no_progress)
-    return read_results(out / "sweeps" / name)
-
-
 def _fixed(name: str) -> dict:
     with open(SWEEPS / f"{name}.toml", "rb") as file:
         return tomllib.load(file).get("fixed", {})
-
-
-def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with open(tmp, "w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(header)
-        writer.writerows(rows)
-    tmp.replace(path)
 
 
 def summarize(table: dict[str, np.ndarray], by: list[str]) -> list[list]:
@@ -143,13 +122,13 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     header = ["n_gaits", "trials", "converged", "fraction", "ci_low", "ci_high"]
-    table = _run("gait_convergence", out, args)
+    table = run_named_sweep("gait_convergence", out, args)
     ours = summarize(table, ["n_gaits"])
-    _write_csv(out / "gait_convergence.csv", header, ours)
-    blocked = summarize(_run("gait_convergence_blocked", out, args), ["n_gaits"])
-    _write_csv(out / "gait_convergence_blocked.csv", header, blocked)
+    write_csv(out / "gait_convergence.csv", header, ours)
+    blocked = summarize(run_named_sweep("gait_convergence_blocked", out, args), ["n_gaits"])
+    write_csv(out / "gait_convergence_blocked.csv", header, blocked)
     budget = budget_curve(table, _fixed("gait_convergence")["max_epochs"])
-    _write_csv(out / "gait_convergence_budget.csv", ["n_gaits", "presentations", "epochs", "trials", "fraction"], budget)
+    write_csv(out / "gait_convergence_budget.csv", ["n_gaits", "presentations", "epochs", "trials", "fraction"], budget)
     _plot_gaits(out / "gait_convergence.png", ours, blocked, budget)
 
     print(f"{'gaits':<10}{'interleaved':>22}{'blocked':>22}{'paper':>10}")
@@ -196,7 +175,7 @@ def main_choices(args: argparse.Namespace) -> int:
     """``spikejax reproduce gait-choices --out DIR [--trials N]``."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    table = _run("gait_choices", out, args)
+    table = run_named_sweep("gait_choices", out, args)
     rows = summarize(table, ["alpha", "w_high", "lr"])
     for row in rows:
         m = (table["alpha"] == row[0]) & (table["w_high"] == row[1]) & (table["lr"] == row[2])
@@ -204,7 +183,7 @@ def main_choices(args: argparse.Namespace) -> int:
         row.append(round(float(np.mean(ok & (table["epochs"][m] <= 50))), 4))
         row.append(float(np.median(table["epochs"][m][ok])) if ok.any() else float("nan"))
     header = ["alpha", "w_high", "lr", "trials", "converged", "fraction", "ci_low", "ci_high", "fraction_50", "median_epochs"]
-    _write_csv(out / "gait_choices.csv", header, rows)
+    write_csv(out / "gait_choices.csv", header, rows)
     max_epochs = int(table["epochs"].max())
     _plot_choices(out / "gait_choices.png", table, (50, max(max_epochs, 50)))
     best = sorted(rows, key=lambda r: -r[5])[:5]

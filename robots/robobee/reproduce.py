@@ -20,7 +20,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import jax
@@ -28,35 +27,16 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
-from spikejax.errors import UserError
 from spikejax.stats import wilson_interval
-from spikejax.sweep import load_sweep, read_results, run_sweep, trial_key
+from robots.common import run_named_sweep, write_csv
+from spikejax.sweep import trial_key
 from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.flight import flight_plan, fly
 from robots.robobee.lqr import altitude_gains
 from robots.robobee.params import default_params
 from robots.robobee.trial import nominal_gain
 
-SWEEPS = Path(__file__).resolve().parents[2] / "sweeps"
 FLIGHTS = {0: "flight 1 (q0 -> q1 -> q2)", 1: "flight 2 (landing)"}
-
-
-def _run(name: str, out: Path, args: argparse.Namespace) -> dict[str, np.ndarray]:
-    path = SWEEPS / f"{name}.toml"
-    if not path.exists():
-        raise UserError(f"sweep file {path} not found (install spikejax from its source tree: pip install -e .)")
-    spec = load_sweep(path, seeds=args.trials, chunk_size=args.chunk_size)
-    run_sweep(spec, out / "sweeps" / name, progress=not args.no_progress)
-    return read_results(out / "sweeps" / name)
-
-
-def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(header)
-        writer.writerows(rows)
-    tmp.replace(path)
 
 
 def flight_rows(table: dict[str, np.ndarray]) -> list[list]:
@@ -153,9 +133,9 @@ def main(args: argparse.Namespace) -> int:
     """``spikejax reproduce robobee --out DIR [--trials N]``."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    table = _run("robobee_flights", out, args)
+    table = run_named_sweep("robobee_flights", out, args)
     rows = flight_rows(table)
-    _write_csv(out / "robobee.csv", HEADER, rows)
+    write_csv(out / "robobee.csv", HEADER, rows)
     for landing in (0, 1):
         plan, snn, lqr = _replay(landing)
         _plot_flight(out / f"robobee_flight{landing + 1}.png", landing, plan, snn, lqr)
@@ -171,7 +151,7 @@ def main_learning(args: argparse.Namespace) -> int:
     """``spikejax reproduce robobee-learning --out DIR [--trials N]``."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    table = _run("robobee_learning", out, args)
+    table = run_named_sweep("robobee_learning", out, args)
     mus, taus = np.unique(table["mu"]), np.unique(table["tau_reward"])
     rows, grid = [], np.zeros((len(mus), len(taus)))
     for i, mu in enumerate(mus):
@@ -182,7 +162,7 @@ def main_learning(args: argparse.Namespace) -> int:
             grid[i, j] = k / n
             rows.append([float(mu), float(tau), n, k, round(k / n, 4), round(float(low), 4), round(float(high), 4),
                          round(float(np.median(table["rms_error"][m])), 4)])
-    _write_csv(out / "robobee_learning.csv",
+    write_csv(out / "robobee_learning.csv",
                ["mu", "tau_reward", "flights", "reached", "fraction", "ci_low", "ci_high", "rms_control_error_median"], rows)
     fig = Figure(figsize=(5.5, 4.2), layout="constrained")
     ax = fig.subplots()
