@@ -119,8 +119,7 @@ def flight_trial(
     key_net, key_robot = jax.random.split(key)
     robot = randomize(default_params(), key_robot, params.spread)
     K = jnp.asarray(nominal_gain())
-    cparams = controller_params(mu_hidden=1.0, mu_output=1.0, tau_reward=1.0)
-    cparams = cparams._replace(
+    cparams = controller_params()._replace(
         mu_hidden=jnp.asarray(params.mu, jnp.float32),
         mu_output=jnp.asarray(params.mu, jnp.float32),
         tau_reward=jnp.asarray(params.tau_reward, jnp.float32),
