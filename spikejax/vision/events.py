@@ -1,0 +1,80 @@
+"""Address-event streams as a fixed-capacity pytree.
+
+A DVS camera emits events ``(x, y, t, p)``: pixel column, pixel row, time
+stamp and polarity (+1 brighter, -1 darker). Their number varies from frame to
+frame, but arrays under ``jit`` and ``vmap`` must have a static shape, so an
+:class:`Events` holds ``capacity`` slots and a boolean ``valid`` mask
+(DESIGN rule 4). Whoever fills a fixed capacity counts what did not fit and
+returns that count beside the events: an overflow is reported, never silently
+dropped.
+
+Conventions, used by every module of :mod:`spikejax.vision`:
+
+* ``x`` (column) and ``y`` (row) are ``int32`` pixel indices, ``0 <= x < width``,
+  ``0 <= y < height``; the image's row 0 is its top row.
+* ``t`` is ``float32`` seconds.
+* ``p`` is ``int32`` in ``{-1, +1}`` for a valid event.
+* Slots past the last valid event hold zeros and ``valid=False``; a function
+  that consumes events must ignore invalid slots (give them zero weight).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+
+class Events(NamedTuple):
+    """``capacity`` event slots; only those with ``valid`` set are events."""
+
+    x: jax.Array  # (capacity,) int32, column
+    y: jax.Array  # (capacity,) int32, row
+    t: jax.Array  # (capacity,) float32, seconds
+    p: jax.Array  # (capacity,) int32, -1 or +1
+    valid: jax.Array  # (capacity,) bool
+
+    @property
+    def capacity(self) -> int:
+        return self.x.shape[-1]
+
+    def count(self) -> jax.Array:
+        """Number of valid events (per stream, if batched)."""
+        return jnp.sum(self.valid, axis=-1)
+
+
+def empty(capacity: int) -> Events:
+    """An event buffer with ``capacity`` slots and no events."""
+    zeros = jnp.zeros((capacity,), jnp.int32)
+    return Events(zeros, zeros, jnp.zeros((capacity,), jnp.float32), zeros, jnp.zeros((capacity,), bool))
+
+
+def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
+    """Pack the entries where ``mask`` holds into ``capacity`` slots, in order.
+
+    Works under ``jit``: the inputs are flat arrays of any static length ``n``;
+    the first ``capacity`` selected entries (in input order) become the events.
+    Returns ``(events, overflow)``, ``overflow`` being the number of selected
+    entries that did not fit (0 when all fit).
+    """
+    mask = jnp.asarray(mask, bool).reshape(-1)
+    n = mask.shape[0]
+    position = jnp.cumsum(mask) - 1
+    keep = mask & (position < capacity)
+    # Entries that are not kept are scattered to an extra slot that is dropped.
+    index = jnp.where(keep, position, capacity)
+
+    def scatter(values, dtype):
+        values = jnp.broadcast_to(jnp.asarray(values, dtype).reshape(-1), (n,))
+        return jnp.zeros((capacity + 1,), dtype).at[index].set(values)[:capacity]
+
+    events = Events(
+        x=scatter(x, jnp.int32),
+        y=scatter(y, jnp.int32),
+        t=scatter(t, jnp.float32),
+        p=scatter(p, jnp.int32),
+        valid=jnp.arange(capacity) < jnp.minimum(jnp.sum(mask), capacity),
+    )
+    overflow = jnp.maximum(jnp.sum(mask) - capacity, 0)
+    return events, overflow

@@ -1,0 +1,27 @@
+"""The fixed-capacity event buffer: packing in order and counting overflow."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spikejax.vision import compact
+
+
+def test_compact_keeps_selected_in_order_and_counts_overflow():
+    x = jnp.arange(10)
+    mask = jnp.array([0, 1, 1, 0, 1, 1, 1, 0, 1, 0], bool)
+    events, overflow = jax.jit(compact, static_argnums=5)(x, x + 100, x * 0.5, jnp.where(x % 2 == 0, 1, -1), mask, 4)
+    np.testing.assert_array_equal(events.x, [1, 2, 4, 5])
+    np.testing.assert_array_equal(events.y, [101, 102, 104, 105])
+    np.testing.assert_allclose(events.t, [0.5, 1.0, 2.0, 2.5])
+    np.testing.assert_array_equal(events.p, [-1, 1, 1, -1])
+    assert bool(events.valid.all())
+    assert int(overflow) == 2
+
+
+def test_compact_pads_with_invalid_slots():
+    mask = jnp.array([1, 0, 1], bool)
+    events, overflow = compact(jnp.array([3, 4, 5]), 0, 0.0, 1, mask, 5)
+    np.testing.assert_array_equal(events.valid, [True, True, False, False, False])
+    np.testing.assert_array_equal(events.x, [3, 5, 0, 0, 0])
+    assert int(overflow) == 0 and int(events.count()) == 2
