@@ -1,0 +1,274 @@
+"""A pinhole camera that ray-casts spheres, open cylinders and a ground plane in JAX.
+
+Each pixel casts one ray (or ``supersample**2`` rays, averaged) from the camera
+centre and takes the brightness of the nearest surface it hits. Intersections
+are closed forms (a quadratic per sphere and per cylinder, a division for the
+plane), so a 128 x 128 frame of a few primitives is a handful of fused array
+operations that ``jit`` and ``vmap`` like any other JAX function; the camera
+pose is a traced input, so a batch of robots renders a batch of frames in the
+same compiled program as their physics.
+
+The renderer knows nothing of robots: it takes a camera position and
+orientation and a :class:`Scene` of primitive arrays.
+
+Conventions
+-----------
+* World frame: z is up; the ground is the plane ``z = ground_height``.
+* Camera frame (the columns of ``rot``, in world coordinates): x forward along
+  the optical axis, y to the left, z up, the usual body frame of a robot.
+* Image: ``(height, width)``, row 0 at the top, column 0 on the left. Pixel
+  ``(row, col)`` looks through the point ``(col + 0.5, row + 0.5)`` of the image
+  plane, so the optical axis meets the image at ``(width / 2, height / 2)``, the
+  corner shared by the four central pixels.
+* Pinhole model: with horizontal field of view ``fov`` the focal length in
+  pixels is ``f = (width / 2) / tan(fov / 2)``; a point at camera coordinates
+  ``(x, y, z)``, ``x > 0``, is seen at column ``width / 2 - f y / x`` and row
+  ``height / 2 - f z / x``. A sphere of radius ``R`` centred on the axis at
+  distance ``d`` covers a disc of radius ``f R / sqrt(d**2 - R**2)`` pixels.
+* Brightness is in [0, 1]: each primitive has its own, optionally shaded by a
+  directional light (``ambient + (1 - ambient) * max(0, n . light)``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spikejax.errors import UserError
+
+_FAR = 1e6  # "no hit": farther than anything in a scene
+
+
+class Camera(NamedTuple):
+    """Static intrinsics: image size in pixels, horizontal field of view in radians.
+
+    The default, 128 x 128 pixels, is the DVS128 sensor both snake papers
+    simulate; neither paper states the field of view, so the default is 60
+    degrees (1.047 rad), the default ``horizontal_fov`` of a Gazebo camera.
+    """
+
+    width: int = 128
+    height: int = 128
+    fov: float = math.radians(60.0)
+    supersample: int = 1
+
+    @property
+    def focal(self) -> float:
+        """Focal length in pixels, ``(width / 2) / tan(fov / 2)``."""
+        return 0.5 * self.width / math.tan(0.5 * self.fov)
+
+    def validate(self) -> "Camera":
+        if self.width < 1 or self.height < 1:
+            raise UserError(f"camera size must be positive, got {self.width} x {self.height}")
+        if not 0.0 < self.fov < math.pi:
+            raise UserError(f"camera field of view must be in (0, pi) radians, got {self.fov}")
+        if self.supersample < 1:
+            raise UserError(f"camera supersample must be >= 1, got {self.supersample}")
+        return self
+
+
+class Spheres(NamedTuple):
+    """``n`` spheres: centres ``(n, 3)``, radii ``(n,)``, brightness ``(n,)``."""
+
+    center: jax.Array
+    radius: jax.Array
+    brightness: jax.Array
+
+
+class Cylinders(NamedTuple):
+    """``n`` open tubes (pipes, no end caps): a hollow pipe shows its inside.
+
+    ``center (n, 3)`` is the middle of the axis, ``axis (n, 3)`` a unit vector
+    along it, ``radius (n,)``, ``half_length (n,)``; the outer wall has
+    ``brightness (n,)`` and the inner wall ``inner_brightness (n,)``.
+    """
+
+    center: jax.Array
+    axis: jax.Array
+    radius: jax.Array
+    half_length: jax.Array
+    brightness: jax.Array
+    inner_brightness: jax.Array
+
+
+class Scene(NamedTuple):
+    """What the camera sees: spheres, cylinders, the ground and the sky.
+
+    The numbers of spheres and cylinders are static (array shapes); either may
+    be zero. All fields may be traced (a moving target is a traced centre).
+    """
+
+    spheres: Spheres
+    cylinders: Cylinders
+    ground_height: jax.Array | float = 0.0
+    ground_brightness: jax.Array | float = 0.35
+    sky_brightness: jax.Array | float = 0.75
+    light: jax.Array | tuple = (0.3, -0.2, 0.93)  # direction towards the light, world frame
+    ambient: jax.Array | float = 0.6
+
+
+def spheres(center, radius, brightness) -> Spheres:
+    """Spheres from array-likes; a single sphere may be given unbatched (``center`` of shape (3,))."""
+    center = jnp.asarray(center, jnp.float32).reshape(-1, 3)
+    n = center.shape[0]
+    return Spheres(center, jnp.broadcast_to(jnp.asarray(radius, jnp.float32), (n,)),
+                   jnp.broadcast_to(jnp.asarray(brightness, jnp.float32), (n,)))
+
+
+def no_spheres() -> Spheres:
+    return spheres(jnp.zeros((0, 3)), 1.0, 0.0)
+
+
+def no_cylinders() -> Cylinders:
+    z = jnp.zeros((0,), jnp.float32)
+    return Cylinders(jnp.zeros((0, 3)), jnp.zeros((0, 3)), z, z, z, z)
+
+
+def standing_cylinder(x, y, radius, height, brightness=0.1, inner_brightness=0.05, base=0.0) -> Cylinders:
+    """One vertical pipe standing on the ground at ``(x, y)``, ``height`` tall."""
+    return Cylinders(jnp.asarray([[x, y, base + 0.5 * height]], jnp.float32), jnp.asarray([[0.0, 0.0, 1.0]]),
+                     jnp.asarray([radius], jnp.float32), jnp.asarray([0.5 * height], jnp.float32),
+                     jnp.asarray([brightness], jnp.float32), jnp.asarray([inner_brightness], jnp.float32))
+
+
+def lying_cylinder(center, yaw, radius, length, brightness=0.1, inner_brightness=0.05) -> Cylinders:
+    """One horizontal pipe centred at ``center`` (3,), its axis at angle ``yaw`` from the world x axis."""
+    axis = jnp.stack([jnp.cos(yaw), jnp.sin(yaw), 0.0 * yaw])[None].astype(jnp.float32)
+    return Cylinders(jnp.asarray(center, jnp.float32).reshape(1, 3), axis, jnp.asarray([radius], jnp.float32),
+                     jnp.asarray([0.5 * length], jnp.float32), jnp.asarray([brightness], jnp.float32),
+                     jnp.asarray([inner_brightness], jnp.float32))
+
+
+def concat_cylinders(*cyls: Cylinders) -> Cylinders:
+    """Several :class:`Cylinders` as one."""
+    return Cylinders(*(jnp.concatenate(parts, axis=0) for parts in zip(*cyls)))
+
+
+def ray_directions(camera: Camera) -> jax.Array:
+    """Unit ray directions in the camera frame, ``(height * s, width * s, 3)`` for supersample ``s``."""
+    s = camera.supersample
+    f = camera.focal
+    cols = (np.arange(camera.width * s) + 0.5) / s - 0.5 * camera.width
+    rows = (np.arange(camera.height * s) + 0.5) / s - 0.5 * camera.height
+    col, row = np.meshgrid(cols, rows)
+    d = np.stack([np.full_like(col, f), -col, -row], axis=-1)
+    return jnp.asarray(d / np.linalg.norm(d, axis=-1, keepdims=True), jnp.float32)
+
+
+def project(camera: Camera, cam_pos, rot, point) -> jax.Array:
+    """Image coordinates ``(col, row)`` (continuous, pixel corners at integers) of a world point.
+
+    The pinhole model of the module docstring; valid for points in front of the camera.
+    """
+    p = jnp.asarray(rot).T @ (jnp.asarray(point) - jnp.asarray(cam_pos))
+    f = camera.focal
+    return jnp.stack([0.5 * camera.width - f * p[1] / p[0], 0.5 * camera.height - f * p[2] / p[0]])
+
+
+def _shade(scene: Scene, base, normal):
+    light = jnp.asarray(scene.light, jnp.float32)
+    light = light / jnp.linalg.norm(light)
+    lambert = jnp.maximum(jnp.sum(normal * light, axis=-1), 0.0)
+    return base * (scene.ambient + (1.0 - scene.ambient) * lambert)
+
+
+def intersect(scene: Scene, origin, dirs) -> tuple[jax.Array, jax.Array]:
+    """Distance to the nearest surface along each ray and its shaded brightness.
+
+    ``origin`` (3,), ``dirs`` (..., 3) unit vectors, all in the world frame.
+    Returns ``(t, brightness)`` of shape ``dirs.shape[:-1]``; rays that hit
+    nothing have ``t = 1e6`` and the sky's brightness.
+    """
+    shape = dirs.shape[:-1]
+    d = dirs.reshape(-1, 3)
+    eps = 1e-4
+    hits_t = []
+    hits_b = []
+
+    # Ground plane z = h, seen from above: normal +z.
+    dz = d[:, 2]
+    t_ground = (scene.ground_height - origin[2]) / jnp.where(dz < 0, dz, -1.0)
+    t_ground = jnp.where((dz < 0) & (origin[2] > scene.ground_height) & (t_ground > eps), t_ground, _FAR)
+    hits_t.append(t_ground[:, None])
+    hits_b.append(_shade(scene, jnp.full_like(dz, scene.ground_brightness), jnp.array([0.0, 0.0, 1.0]))[:, None])
+
+    sph = scene.spheres
+    if sph.center.shape[0]:
+        # |o + t d - c|^2 = R^2 with |d| = 1: t^2 + 2 b t + c = 0.
+        w = origin - sph.center  # (n, 3)
+        b = d @ w.T  # (rays, n)
+        c = jnp.sum(w * w, axis=-1) - sph.radius**2
+        disc = b * b - c
+        root = jnp.sqrt(jnp.maximum(disc, 0.0))
+        t0, t1 = -b - root, -b + root
+        t = jnp.where(t0 > eps, t0, t1)
+        t = jnp.where((disc >= 0) & (t > eps), t, _FAR)
+        point = origin + t[..., None] * d[:, None, :]
+        normal = (point - sph.center) / sph.radius[:, None]
+        hits_t.append(t)
+        hits_b.append(_shade(scene, sph.brightness, normal))
+
+    cyl = scene.cylinders
+    if cyl.center.shape[0]:
+        # Perpendicular parts to the axis: |w_p + t d_p|^2 = R^2, then |(w + t d) . a| <= half_length.
+        w = origin - cyl.center  # (n, 3)
+        da = d @ cyl.axis.T  # (rays, n)
+        wa = jnp.sum(w * cyl.axis, axis=-1)  # (n,)
+        dp = d[:, None, :] - da[..., None] * cyl.axis  # (rays, n, 3)
+        wp = w - wa[:, None] * cyl.axis  # (n, 3)
+        qa = jnp.sum(dp * dp, axis=-1)
+        qb = jnp.sum(dp * wp, axis=-1)
+        qc = jnp.sum(wp * wp, axis=-1) - cyl.radius**2
+        disc = qb * qb - qa * qc
+        root = jnp.sqrt(jnp.maximum(disc, 0.0))
+        safe_a = jnp.where(qa > 1e-12, qa, 1.0)
+        t0, t1 = (-qb - root) / safe_a, (-qb + root) / safe_a
+
+        def on_tube(t):
+            return (disc >= 0) & (qa > 1e-12) & (t > eps) & (jnp.abs(wa + t * da) <= cyl.half_length)
+
+        first = on_tube(t0)
+        t = jnp.where(first, t0, jnp.where(on_tube(t1), t1, _FAR))
+        radial = wp + t[..., None] * dp
+        normal = radial / cyl.radius[:, None]
+        # The far root seen first means the ray looks at the inside wall.
+        inside = ~first
+        base = jnp.where(inside, cyl.inner_brightness, cyl.brightness)
+        hits_t.append(t)
+        hits_b.append(_shade(scene, base, jnp.where(inside[..., None], -normal, normal)))
+
+    t_all = jnp.concatenate(hits_t, axis=1)
+    b_all = jnp.concatenate(hits_b, axis=1)
+    nearest = jnp.argmin(t_all, axis=1)
+    t_min = jnp.take_along_axis(t_all, nearest[:, None], axis=1)[:, 0]
+    b_min = jnp.take_along_axis(b_all, nearest[:, None], axis=1)[:, 0]
+    bright = jnp.where(t_min < _FAR, b_min, scene.sky_brightness)
+    return t_min.reshape(shape), jnp.clip(bright, 0.0, 1.0).reshape(shape)
+
+
+def render(scene: Scene, cam_pos, rot, camera: Camera = Camera()) -> jax.Array:
+    """The frame the camera at ``cam_pos`` (3,) with orientation ``rot`` (3, 3) sees.
+
+    ``rot``'s columns are the camera's forward, left and up axes in the world
+    frame (see the module docstring). Returns ``(height, width)`` float32
+    brightness in [0, 1]; with ``camera.supersample = s`` each pixel is the mean
+    of an ``s x s`` grid of rays, which antialiases the edges.
+    """
+    cam_pos = jnp.asarray(cam_pos, jnp.float32)
+    dirs = ray_directions(camera) @ jnp.asarray(rot, jnp.float32).T
+    _, bright = intersect(scene, cam_pos, dirs)
+    s = camera.supersample
+    if s > 1:
+        bright = bright.reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
+    return bright
+
+
+def depth(scene: Scene, cam_pos, rot, camera: Camera = Camera()) -> jax.Array:
+    """Distance along each pixel's central ray to the nearest surface (1e6 for the sky), ``(height, width)``."""
+    dirs = ray_directions(camera._replace(supersample=1)) @ jnp.asarray(rot, jnp.float32).T
+    t, _ = intersect(scene, jnp.asarray(cam_pos, jnp.float32), dirs)
+    return t

@@ -1,0 +1,150 @@
+"""The ray-cast pinhole camera: projections by the closed-form pinhole model, distances by MuJoCo's mj_ray."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from spikejax.errors import UserError
+from spikejax.vision import render as R
+
+
+def _sphere_only(center, radius=0.3, brightness=0.05):
+    return R.Scene(R.spheres(center, radius, brightness), R.no_cylinders(), ground_brightness=0.75)  # ground as sky
+
+
+def _yaw(angle):
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _disc(img, level=0.5):
+    """Pixel mask of the dark target on the bright sky, its centroid (col, row) and area radius."""
+    cover = (0.75 - np.asarray(img)) / (0.75 - 0.05)  # fraction of each pixel covered (flat shading)
+    rows, cols = np.mgrid[: img.shape[0], : img.shape[1]]
+    area = cover.sum()
+    return (cover * (cols + 0.5)).sum() / area, (cover * (rows + 0.5)).sum() / area, math.sqrt(area / math.pi)
+
+
+@pytest.mark.parametrize("distance", [1.6, 3.0])
+def test_sphere_ahead_projects_to_centre_with_pinhole_radius(distance):
+    camera = R.Camera(supersample=4)
+    scene = _sphere_only([distance, 0.0, 1.0])._replace(ambient=1.0)
+    img = R.render(scene, jnp.array([0.0, 0.0, 1.0]), jnp.eye(3), camera)
+    col, row, radius = _disc(img)
+    expected = camera.focal * 0.3 / math.sqrt(distance**2 - 0.3**2)
+    assert abs(col - 64.0) < 0.05 and abs(row - 64.0) < 0.05
+    assert radius == pytest.approx(expected, abs=0.15)
+    # Symmetric about both image axes (the optical axis is the corner of the four central pixels).
+    np.testing.assert_allclose(img, img[::-1, :], atol=1e-6)
+    np.testing.assert_allclose(img, img[:, ::-1], atol=1e-6)
+
+
+def test_off_axis_sphere_lands_where_the_pinhole_model_puts_it():
+    camera = R.Camera(supersample=4)
+    yaw = math.radians(20.0)
+    pos = np.array([1.0, -2.0, 0.5])
+    rot = _yaw(yaw)
+    # 2.5 m ahead, 0.4 m to the left and 0.3 m below the camera, in the camera frame.
+    local = np.array([2.5, 0.4, -0.3])
+    center = pos + rot @ local
+    img = R.render(_sphere_only(center, radius=0.1)._replace(ambient=1.0), pos, rot, camera)
+    col, row, _ = _disc(img)
+    f = camera.focal
+    assert col == pytest.approx(64.0 - f * 0.4 / 2.5, abs=0.3)  # left of centre
+    assert row == pytest.approx(64.0 + f * 0.3 / 2.5, abs=0.3)  # below centre
+    np.testing.assert_allclose(R.project(camera, pos, rot, center), [64.0 - f * 0.16, 64.0 + f * 0.12], rtol=1e-5)
+
+
+def test_focal_length_from_field_of_view():
+    assert R.Camera(width=128, fov=math.radians(90.0)).focal == pytest.approx(64.0)
+    assert R.Camera().focal == pytest.approx(64.0 / math.tan(math.radians(30.0)))
+
+
+def test_ground_horizon_and_brightness():
+    # Level camera 0.5 m above the ground: the top half is sky, the bottom half ground.
+    scene = R.Scene(R.no_spheres(), R.no_cylinders(), ambient=1.0)
+    img = np.asarray(R.render(scene, jnp.array([0.0, 0.0, 0.5]), jnp.eye(3)))
+    np.testing.assert_allclose(img[:64], 0.75)
+    np.testing.assert_allclose(img[64:], 0.35)
+
+
+mujoco = pytest.importorskip("mujoco")
+
+_XML = """
+<mujoco>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 1"/>
+    <geom name="ball" type="sphere" pos="2 0.5 0.4" size="0.3"/>
+    <geom name="post" type="cylinder" pos="3 -1 0.6" size="0.25 0.6"/>
+    <geom name="pipe" type="cylinder" pos="4 1.5 0.4" size="0.3 1.0" euler="0 90 30"/>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_ray_distances_match_mujoco_mj_ray():
+    model = mujoco.MjModel.from_xml_string(_XML)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    pipe_axis = data.geom_xmat[3].reshape(3, 3)[:, 2]
+    scene = R.Scene(
+        R.spheres([2.0, 0.5, 0.4], 0.3, 0.1),
+        R.concat_cylinders(R.standing_cylinder(3.0, -1.0, 0.25, 1.2),
+                           R.Cylinders(jnp.array([[4.0, 1.5, 0.4]]), jnp.asarray(pipe_axis[None], jnp.float32),
+                                       jnp.array([0.3]), jnp.array([1.0]), jnp.array([0.1]), jnp.array([0.05]))),
+    )
+    origin = np.array([0.0, 0.0, 0.45])
+    rng = np.random.default_rng(0)
+    # Rays aimed at random points on the three bodies and the ground (mj_ray caps cylinders; aim at their walls).
+    targets = np.concatenate([
+        [2.0, 0.5, 0.4] + rng.uniform(-0.2, 0.2, (20, 3)),
+        [3.0, -1.0, 0.6] + rng.uniform(-0.2, 0.2, (20, 3)) * [1, 1, 2.5],
+        [4.0, 1.5, 0.4] + np.outer(rng.uniform(-0.6, 0.6, 20), pipe_axis) + rng.uniform(-0.1, 0.1, (20, 3)),
+        rng.uniform([1, -3, -0.5], [8, 3, 0.0], (20, 3)),
+    ])
+    dirs = targets - origin
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    t, _ = R.intersect(scene, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+    expected, caps = [], []
+    for d in dirs:
+        geomid = np.zeros(1, np.int32)
+        dist = mujoco.mj_ray(model, data, origin, d, None, 1, -1, geomid)
+        expected.append(dist)
+        # MuJoCo's cylinders have end caps, the renderer's pipes are open: leave out rays that hit a cap.
+        g = int(geomid[0])
+        axial = (origin + dist * d - data.geom_xpos[g]) @ data.geom_xmat[g].reshape(3, 3)[:, 2]
+        caps.append(model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CYLINDER and abs(axial) > model.geom_size[g, 1] - 1e-6)
+    expected, caps = np.array(expected), np.array(caps)
+    hit = (expected >= 0) & ~caps
+    assert hit.sum() >= 70
+    np.testing.assert_allclose(np.asarray(t)[hit], expected[hit], rtol=1e-4, atol=1e-4)
+
+
+def test_open_pipe_shows_its_inner_wall_end_on():
+    # Looking down the axis of a lying pipe: a ring of inner wall around the dark far opening.
+    scene = R.Scene(R.no_spheres(), R.lying_cylinder([3.0, 0.0, 0.0], 0.0, 0.3, 2.0, 0.2, 0.05), ground_height=-100.0,
+                    ground_brightness=0.75, ambient=1.0)
+    img = np.asarray(R.render(scene, jnp.array([0.0, 0.0, 0.0]), jnp.eye(3)))
+    f = R.Camera().focal
+    assert img[64, 64] == pytest.approx(0.75)  # sky through the far end
+    near, far = f * 0.3 / 2.0, f * 0.3 / 4.0  # radii of the near and far rims
+    ring_col = int(64 + 0.5 * (near + far))
+    assert img[64, ring_col] == pytest.approx(0.05)  # inner wall between the rims
+    assert img[64, int(64 + near) + 2] == pytest.approx(0.75)  # sky outside the pipe
+
+
+def test_render_vmaps_over_camera_poses():
+    scene = _sphere_only([2.0, 0.0, 0.0])
+    poses = jnp.stack([jnp.zeros(3), jnp.array([0.0, 0.3, 0.0])])
+    batch = jax.jit(jax.vmap(lambda p: R.render(scene, p, jnp.eye(3))))(poses)
+    np.testing.assert_allclose(batch[1], R.render(scene, poses[1], jnp.eye(3)), atol=1e-6)
+    # Moving the camera left moves the sphere right in the image.
+    assert _disc(batch[1])[0] > _disc(batch[0])[0] + 5
+
+
+def test_bad_camera_is_a_user_error():
+    with pytest.raises(UserError, match="field of view"):
+        R.Camera(fov=4.0).validate()
