@@ -19,6 +19,7 @@ REPRODUCTIONS = {
     "gait-choices": "robots.hexapod.reproduce:main_choices",
     "robobee": "robots.robobee.reproduce:main",
     "robobee-learning": "robots.robobee.reproduce:main_learning",
+    "robobee-populations": "robots.robobee.reproduce:main_populations",
 }
 BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",

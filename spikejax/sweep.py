@@ -31,8 +31,11 @@ A trial function runs one trial; the engine adds the batch with ``jax.vmap``::
     def convergence_trial(params: GaitParams, key: jax.Array, *,
                           steps_per_gait: int = 100) -> GaitResult: ...
 
-The first parameter's annotation names the params NamedTuple. Every ``[grid]``
-key is one of its fields. A ``[fixed]`` key is either a field (passed as a traced
+The first parameter's annotation names the params NamedTuple. A ``[grid]`` key
+is one of its fields (traced: one compiled program serves every value) or a
+keyword-only parameter of the function (static: the engine compiles one
+program per combination of the static axes' values, so they may shape the
+program, e.g. the size of a network). A ``[fixed]`` key is either a field (passed as a traced
 value, the same in every trial) or a keyword-only parameter of the function
 (passed as a static Python value, which may shape the program). The other fields
 take their defaults. Fields are passed as int32, float32 or bool arrays: by their
@@ -161,12 +164,15 @@ class Axis(NamedTuple):
         name: the params field it sweeps.
         values: the values as the sweep file gives them.
         kind: ``"bool"``, ``"int"`` or ``"float"``: the trial receives them as
-            bool, int32 or float32.
+            bool, int32 or float32 (traced axes), or as Python values (static axes).
+        static: the axis is a keyword-only parameter of the trial, passed as a
+            Python value; each combination of static values is compiled apart.
     """
 
     name: str
     values: tuple[bool | int | float, ...]
     kind: str
+    static: bool = False
 
     def array(self) -> np.ndarray:
         """The values as the trial receives them, shape ``(len(values),)``."""
@@ -340,16 +346,23 @@ def _build_spec(
     params_type, keyword_only, takes_any_keyword = _trial_signature(trial, trial_path)
     field_kinds = _declared_kinds(params_type)
     fields = params_type._fields
-    for key in grid:
-        if key not in fields:
+    axes = []
+    for key, values in grid.items():
+        if key in fields and key in keyword_only:
             raise UserError(
-                f"[grid] key '{key}' is not a field of {params_type.__name__} "
-                f"(fields: {', '.join(fields) or 'none'})"
+                f"[grid] '{key}' is both a field of {params_type.__name__} and a keyword-only parameter of {trial_path}"
             )
-    axes = tuple(
-        Axis(key, tuple(values), _field_kind(field_kinds[key], values, "[grid]", key, params_type))
-        for key, values in grid.items()
-    )
+        if key in fields:
+            axes.append(Axis(key, tuple(values), _field_kind(field_kinds[key], values, "[grid]", key, params_type)))
+        elif key in keyword_only or takes_any_keyword:
+            axes.append(Axis(key, tuple(values), _value_kind(values, f"[grid] {key}"), static=True))
+        else:
+            raise UserError(
+                f"[grid] key '{key}' is neither a field of {params_type.__name__} "
+                f"(fields: {', '.join(fields) or 'none'}) nor a keyword-only parameter of {trial_path} "
+                f"(keyword-only: {', '.join(keyword_only) or 'none'})"
+            )
+    axes = tuple(axes)
     traced, static = _split_fixed(fixed, grid, params_type, field_kinds, keyword_only, takes_any_keyword, trial_path)
     traced = _with_defaults(traced, grid, params_type, field_kinds)
     for name_, parameter in keyword_only.items():
@@ -575,20 +588,28 @@ def _as_result_dict(result: Any, trial_path: str) -> dict[str, Any]:
     )
 
 
-def _bound_trial(spec: SweepSpec) -> Callable[[Any, jax.Array], Any]:
-    return functools.partial(spec.trial, **spec.static) if spec.static else spec.trial
+def _bound_trial(spec: SweepSpec, static_values: Mapping[str, Any]) -> Callable[[Any, jax.Array], Any]:
+    static = {**spec.static, **static_values}
+    return functools.partial(spec.trial, **static) if static else spec.trial
+
+
+def _static_values(spec: SweepSpec, trial: int) -> dict[str, Any]:
+    """The static axes' values of trial ``trial`` (empty without static axes)."""
+    coords = np.unravel_index(trial // spec.seeds, spec.grid_shape)
+    return {axis.name: axis.values[int(c)] for axis, c in zip(spec.axes, coords) if axis.static}
 
 
 def _example_params(spec: SweepSpec) -> Any:
     values = dict(spec.traced)
     for axis in spec.axes:
-        values[axis.name] = axis.array()[0]
+        if not axis.static:
+            values[axis.name] = axis.array()[0]
     return spec.params_type(**values)
 
 
 def _result_columns(spec: SweepSpec) -> list[_Column]:
     """The result columns, found by tracing one trial (nothing is compiled)."""
-    trial = _bound_trial(spec)
+    trial = _bound_trial(spec, _static_values(spec, 0))
     names: list[Any] = []
 
     def probe(params: Any, key: jax.Array) -> dict[str, Any]:
@@ -632,10 +653,12 @@ def _table_dtype(dtype: np.dtype, name: str, trial_path: str) -> str:
     )
 
 
-def _compile(spec: SweepSpec, results: list[_Column], size: int) -> Callable[..., tuple[jax.Array, ...]]:
-    """The trial, vmapped over ``size`` trials and compiled once."""
-    trial = _bound_trial(spec)
-    on_grid = {axis.name for axis in spec.axes}
+def _compile(
+    spec: SweepSpec, results: list[_Column], size: int, static_values: Mapping[str, Any]
+) -> Callable[..., tuple[jax.Array, ...]]:
+    """The trial, vmapped over ``size`` trials and compiled once for these static values."""
+    trial = _bound_trial(spec, static_values)
+    on_grid = {axis.name for axis in spec.axes if not axis.static}
     params_axes = spec.params_type(**{field: 0 if field in on_grid else None for field in spec.params_type._fields})
 
     def one(params: Any, seed: jax.Array) -> tuple[jax.Array, ...]:
@@ -653,7 +676,8 @@ def _chunk_inputs(spec: SweepSpec, start: int, end: int, size: int) -> tuple[Any
     coords = np.unravel_index(point, spec.grid_shape)
     values = dict(spec.traced)
     for axis, coord in zip(spec.axes, coords):
-        values[axis.name] = axis.array()[coord]
+        if not axis.static:
+            values[axis.name] = axis.array()[coord]
     return spec.params_type(**values), seed.astype(np.int32)
 
 
@@ -780,10 +804,24 @@ def _missing_ranges(parts: list[_Part], n_trials: int) -> list[tuple[int, int]]:
     return missing
 
 
-def _chunks(missing: list[tuple[int, int]], size: int) -> Iterator[tuple[int, int]]:
+def _chunks(missing: list[tuple[int, int]], size: int, block: int | None = None) -> Iterator[tuple[int, int]]:
+    """Chunks of at most ``size`` trials covering ``missing``, none crossing a multiple of ``block``."""
     for start, end in missing:
-        for chunk_start in range(start, end, size):
-            yield chunk_start, min(chunk_start + size, end)
+        chunk_start = start
+        while chunk_start < end:
+            chunk_end = min(chunk_start + size, end)
+            if block is not None:
+                chunk_end = min(chunk_end, (chunk_start // block + 1) * block)
+            yield chunk_start, chunk_end
+            chunk_start = chunk_end
+
+
+def _static_block(spec: SweepSpec) -> int | None:
+    """Trials that share the static axes' values come in runs of this length (None: no static axis)."""
+    static = [i for i, axis in enumerate(spec.axes) if axis.static]
+    if not static:
+        return None
+    return spec.seeds * math.prod(spec.grid_shape[static[-1] + 1 :])
 
 
 def _write_part(parts_dir: Path, start: int, end: int, rows: str) -> _Part:
@@ -1040,17 +1078,29 @@ def _run_missing(
     missing = _missing_ranges(table.parts, spec.n_trials)
     if not missing:
         return
-    size = min(spec.chunk_size, max(end - start for start, end in missing))
-    if progress:
-        print(f"{spec.name}: compiling for chunks of {size} trials", file=sys.stderr, flush=True)
-    began = time.perf_counter()
-    compiled = _compile(spec, results, size)
-    run["compile_seconds"] = round(time.perf_counter() - began, 3)
+    block = _static_block(spec)
+    chunks = list(_chunks(missing, spec.chunk_size, block))
+    size = max(end - start for start, end in chunks)
+    programs: dict[tuple[Any, ...], Callable[..., tuple[jax.Array, ...]]] = {}
+    run["compile_seconds"] = 0.0
+
+    def program(start: int) -> Callable[..., tuple[jax.Array, ...]]:
+        static_values = _static_values(spec, start)
+        signature = tuple(static_values.items())
+        if signature not in programs:
+            if progress:
+                shown = "".join(f", {name} = {value}" for name, value in signature)
+                print(f"{spec.name}: compiling for chunks of {size} trials{shown}", file=sys.stderr, flush=True)
+            began = time.perf_counter()
+            programs[signature] = _compile(spec, results, size, static_values)
+            run["compile_seconds"] = round(run["compile_seconds"] + time.perf_counter() - began, 3)
+        return programs[signature]
+
     with _progress_bar(spec, table.done, progress) as bar:
         # One chunk in flight while the previous one is written: dispatch is asynchronous.
         pending = None
-        for start, end in _chunks(missing, size):
-            outputs = compiled(*_chunk_inputs(spec, start, end, size))
+        for start, end in chunks:
+            outputs = program(start)(*_chunk_inputs(spec, start, end, size))
             if pending is not None:
                 _store(spec, table, bar, run, *pending)
             pending = (start, end, outputs)

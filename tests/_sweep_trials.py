@@ -97,3 +97,11 @@ def counting_trial(params: ToyParams, key: jax.Array) -> ToyResult:
     """``toy_trial``, counting its traces in ``TRACES``."""
     TRACES.append(params)
     return toy_trial(params, key)
+
+
+def shaped_trial(params: ToyParams, key: jax.Array, *, size: int = 1, scale: float = 1.0) -> ToyResult:
+    """``toy_trial`` whose draw is the mean of ``size`` uniforms: ``size`` shapes the program."""
+    TRACES.append(size)
+    draw = jnp.mean(jax.random.uniform(key, (size,)))
+    value = toy_value(params.a, params.n, params.flag, params.offset, draw, scale)
+    return ToyResult(value=value, count=params.n * 10 + size, draw=draw, positive=value > 0)

@@ -61,3 +61,31 @@ def test_reproduce_robobee_small(tmp_path):
     assert all(float(r["reached"]) == 1.0 for r in rows)
     for name in ("robobee_flight1.png", "robobee_flight2.png", "robobee_seeds.png"):
         assert (out / name).stat().st_size > 10_000
+
+
+def test_population_sweep_compiles_one_program_per_size():
+    from robots.common import SWEEPS
+    from spikejax.sweep import load_sweep
+
+    spec = load_sweep(SWEEPS / "robobee_populations.toml")
+    assert {axis.name: axis.static for axis in spec.axes} == {"n_per_input": True, "n_hidden": True}
+    assert spec.n_trials == 3 * 4 * 64
+
+
+def test_success_map_counts_and_intervals(tmp_path):
+    from robots.robobee.reproduce import _success_map
+    from spikejax.stats import wilson_interval
+
+    table = {
+        "n_per_input": np.array([10, 10, 10, 50, 50, 50, 10, 50]),
+        "n_hidden": np.array([25, 25, 25, 25, 25, 25, 100, 100]),
+        "reached": np.array([1, 0, 0, 1, 1, 1, 0, 1], bool),
+        "rms_error": np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]),
+    }
+    rows = _success_map(tmp_path, "map", table, "n_per_input", "n_hidden", ("a", "b"), "t")
+    assert [r[:5] for r in rows] == [[10, 25, 3, 1, 0.3333], [10, 100, 1, 0, 0.0], [50, 25, 3, 3, 1.0],
+                                     [50, 100, 1, 1, 1.0]]
+    assert rows[0][5] == round(float(wilson_interval(1, 3)[0]), 4) and rows[0][7] == 0.2
+    with open(tmp_path / "map.csv") as file:
+        assert len(list(csv.reader(file))) == 5
+    assert (tmp_path / "map.png").stat().st_size > 0

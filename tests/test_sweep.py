@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -135,6 +136,43 @@ def test_one_compilation_for_all_chunks(tmp_path):
 
     # One trace to find the result columns, one to compile: none per chunk.
     assert len(_sweep_trials.TRACES) == 2
+
+
+STATIC = """\
+[sweep]
+name = "static"
+trial = "_sweep_trials:shaped_trial"
+seeds = 3
+chunk_size = 4
+
+[fixed]
+scale = 2.0
+
+[grid]
+a = [1.0, -2.5]
+size = [1, 4]
+n = [1, 2]
+"""
+
+
+@pytest.mark.parametrize("chunk_size", [1, 4, 100])
+def test_static_grid_axis_compiles_once_per_value(tmp_path, chunk_size):
+    import _sweep_trials
+
+    _sweep_trials.TRACES.clear()
+    _run(_write(tmp_path, STATIC), tmp_path / "out", chunk_size=chunk_size)
+    table = read_results(tmp_path / "out")
+
+    # One trace for the result columns, then one compilation per static value, in grid order.
+    assert _sweep_trials.TRACES == [1, 1, 4]
+    assert list(table)[:5] == ["trial", "seed", "a", "size", "n"]
+    rows = [(point, seed) for point in itertools.product([1.0, -2.5], [1, 4], [1, 2]) for seed in range(3)]
+    for i, ((a, size, n), seed) in enumerate(rows):
+        draw = np.float32(jnp.mean(jax.random.uniform(trial_key(0, seed), (size,))))
+        assert (table["a"][i], table["size"][i], table["n"][i], table["seed"][i]) == (a, size, n, seed)
+        assert table["count"][i] == n * 10 + size
+        np.testing.assert_allclose(table["draw"][i], draw, rtol=VALUE_RTOL)
+        np.testing.assert_allclose(table["value"][i], 2.0 * a * n + np.sin(draw), rtol=VALUE_RTOL)
 
 
 def test_keys_are_not_reused(tmp_path):
@@ -270,7 +308,7 @@ BAD_FILES = {
     "float for int": (TOY.replace("n = [1, 2, 3]", "n = [1.5]"), "[grid] n must hold int values"),
     "grid key not a param": (
         TOY.replace("n = [1, 2, 3]", "m = [1, 2, 3]"),
-        "[grid] key 'm' is not a field of ToyParams (fields: a, n, flag, offset)",
+        "[grid] key 'm' is neither a field of ToyParams (fields: a, n, flag, offset) nor a keyword-only parameter",
     ),
     "fixed key unknown": (
         TOY.replace("scale = 2.0", "scael = 2.0"),

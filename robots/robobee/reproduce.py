@@ -14,7 +14,9 @@
 
 ``robobee-learning`` runs ``sweeps/robobee_learning.toml`` and writes
 ``robobee_learning.csv`` and ``robobee_learning.png``, the success rate over
-``mu`` and ``tau`` with randomised robots.
+``mu`` and ``tau`` with randomised robots; ``robobee-populations`` runs
+``sweeps/robobee_populations.toml`` and writes ``robobee_populations.csv`` and
+``.png``, the success rate over the input and hidden population sizes.
 """
 
 from __future__ import annotations
@@ -147,36 +149,57 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def main_learning(args: argparse.Namespace) -> int:
-    """``spikejax reproduce robobee-learning --out DIR [--trials N]``."""
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_learning", out, args)
-    mus, taus = np.unique(table["mu"]), np.unique(table["tau_reward"])
-    rows, grid = [], np.zeros((len(mus), len(taus)))
-    for i, mu in enumerate(mus):
-        for j, tau in enumerate(taus):
-            m = (table["mu"] == mu) & (table["tau_reward"] == tau)
+def _success_map(out: Path, name: str, table: dict[str, np.ndarray], rows_axis: str, cols_axis: str,
+                 labels: tuple[str, str], title: str, fmt=("{:g}".format, "{:g}".format)) -> list[list]:
+    """Success rate over two grid axes: ``out/NAME.csv`` (Wilson intervals) and ``out/NAME.png``."""
+    row_values, col_values = np.unique(table[rows_axis]), np.unique(table[cols_axis])
+    rows, grid = [], np.zeros((len(row_values), len(col_values)))
+    for i, rv in enumerate(row_values):
+        for j, cv in enumerate(col_values):
+            m = (table[rows_axis] == rv) & (table[cols_axis] == cv)
             n, k = int(m.sum()), int(table["reached"][m].sum())
             low, high = wilson_interval(k, n)
             grid[i, j] = k / n
-            rows.append([float(mu), float(tau), n, k, round(k / n, 4), round(float(low), 4), round(float(high), 4),
+            rows.append([rv.item(), cv.item(), n, k, round(k / n, 4), round(float(low), 4), round(float(high), 4),
                          round(float(np.median(table["rms_error"][m])), 4)])
-    write_csv(out / "robobee_learning.csv",
-               ["mu", "tau_reward", "flights", "reached", "fraction", "ci_low", "ci_high", "rms_control_error_median"], rows)
+    write_csv(out / f"{name}.csv",
+              [rows_axis, cols_axis, "flights", "reached", "fraction", "ci_low", "ci_high", "rms_control_error_median"],
+              rows)
     fig = Figure(figsize=(5.5, 4.2), layout="constrained")
     ax = fig.subplots()
     im = ax.imshow(100 * grid, vmin=0, vmax=100, cmap="viridis", origin="lower")
     for (i, j), v in np.ndenumerate(grid):
         ax.text(j, i, f"{100 * v:.0f}", ha="center", va="center", color="w" if v < 0.6 else "k")
-    ax.set_xticks(range(len(taus)), [f"{1e3 * t:g}" for t in taus])
-    ax.set_yticks(range(len(mus)), [f"{m:g}" for m in mus])
-    ax.set_xlabel("reward time constant tau (ms)")
-    ax.set_ylabel("learning rate mu")
-    ax.set_title(f"flight 1, robots +-20 %: both waypoints reached (%)\n{int(m.sum())} flights per cell", fontsize=9)
+    ax.set_xticks(range(len(col_values)), [fmt[1](v) for v in col_values])
+    ax.set_yticks(range(len(row_values)), [fmt[0](v) for v in row_values])
+    ax.set_ylabel(labels[0])
+    ax.set_xlabel(labels[1])
+    ax.set_title(f"{title}\n{rows[0][2]} flights per cell", fontsize=9)
     fig.colorbar(im, ax=ax)
-    fig.savefig(out / "robobee_learning.png", dpi=110)
+    fig.savefig(out / f"{name}.png", dpi=110)
     for r in rows:
-        print(f"mu={r[0]:g} tau={1e3 * r[1]:g} ms: {r[4]:.1%} [{r[5]:.1%}, {r[6]:.1%}] of {r[2]}")
-    print(f"wrote {out / 'robobee_learning.csv'} and {out / 'robobee_learning.png'}")
+        print(f"{rows_axis}={r[0]:g} {cols_axis}={r[1]:g}: {r[4]:.1%} [{r[5]:.1%}, {r[6]:.1%}] of {r[2]}")
+    print(f"wrote {out / (name + '.csv')} and {out / (name + '.png')}")
+    return rows
+
+
+def main_learning(args: argparse.Namespace) -> int:
+    """``spikejax reproduce robobee-learning --out DIR [--trials N]``: success over mu and tau."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = run_named_sweep("robobee_learning", out, args)
+    _success_map(out, "robobee_learning", table, "mu", "tau_reward",
+                 ("learning rate mu", "reward time constant tau (ms)"),
+                 "flight 1, robots +-20 %: both waypoints reached (%)", ("{:g}".format, lambda tau: f"{1e3 * tau:g}"))
+    return 0
+
+
+def main_populations(args: argparse.Namespace) -> int:
+    """``spikejax reproduce robobee-populations --out DIR [--trials N]``: success over the layer sizes."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = run_named_sweep("robobee_populations", out, args)
+    _success_map(out, "robobee_populations", table, "n_per_input", "n_hidden",
+                 ("input neurons per state variable", "hidden neurons"),
+                 "flight 1, robots +-20 %, 50 output neurons: both waypoints reached (%)")
     return 0
