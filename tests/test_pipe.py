@@ -1,0 +1,175 @@
+"""Pipe detection (Alg. 2) and relative position (Alg. 3, Eqs. 4-9) of the snake pipe-tracking paper."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from spikejax.vision import pipe as pp
+
+THETA = jnp.deg2rad(jnp.arange(180.0))  # the paper's line grid: 1 degree
+RHO = jnp.arange(-90.0, 180.0)  # signed rho, 1 pixel
+
+
+def _counts(*lines):
+    """Positive and negative count grids with the given (polarity, theta_deg, rho, count)."""
+    pos = np.zeros((180, RHO.shape[0]), np.float32)
+    neg = np.zeros_like(pos)
+    for polarity, theta, rho, count in lines:
+        (pos if polarity > 0 else neg)[theta, int(rho) + 90] = count
+    return jnp.asarray(pos), jnp.asarray(neg)
+
+
+def test_body_is_the_most_frequent_parallel_opposite_pair():
+    pos, neg = _counts(
+        (+1, 90, 40, 5),  # left edge x = 40
+        (-1, 91, 60, 4),  # right edge, 1 degree off: parallel within 5 degrees
+        (-1, 30, 50, 9),  # strongest negative, not parallel: rejected
+        (+1, 90, 41, 8),  # a stronger left edge a pixel over (its spikes outnumber x = 40's)
+        (-1, 90, 42, 2),  # parallel to both positives but too close to x = 41, and rarer
+        (+1, 10, 5, 1),  # pair only with nothing
+    )
+    found = pp.find_body(pp.BodyParams(), pos, neg, THETA, RHO, t=0.25)
+    assert bool(found.valid) and int(found.kind) == pp.BODY
+    # Positive x=41 (8 spikes) with negative rho=60 (4) is the best pair: min(8, 4) = 4 > min(5, 4).
+    assert float(found.score) == 4.0
+    np.testing.assert_allclose(float(found.width), 19.0)
+    # Columns at the middle row (y = 64): 41 and (60 - 64 cos 91 deg) / sin 91 deg.
+    x_right = (60 - 64 * math.cos(math.radians(91))) / math.sin(math.radians(91))
+    np.testing.assert_allclose(float(found.pos), 0.5 * (41 + x_right), atol=1e-4)
+    np.testing.assert_allclose(float(found.theta), math.radians(90.5), atol=1e-6)
+    np.testing.assert_allclose(float(found.t), 0.25)
+
+
+def test_body_pairs_across_the_theta_wrap():
+    # theta = 0: the row y = rho; theta = 179 deg is nearly the same direction with rho ~ -y.
+    pos, neg = _counts((+1, 0, 30, 3), (-1, 179, -50, 3))
+    found = pp.find_body(pp.BodyParams(), pos, neg, THETA, RHO, t=0.0)
+    assert bool(found.valid)
+    np.testing.assert_allclose(float(found.width), 20.0, atol=1e-4)
+    assert float(found.theta) < math.radians(1.0) or float(found.theta) > math.radians(179.0)
+
+
+@pytest.mark.parametrize(
+    "lines, params",
+    [
+        ([(+1, 90, 40, 5), (-1, 100, 60, 5)], pp.BodyParams()),  # 10 degrees apart
+        ([(+1, 90, 40, 5), (-1, 90, 41, 5)], pp.BodyParams()),  # one edge's two polarities
+        ([(+1, 90, 40, 5), (-1, 90, 60, 5)], pp.BodyParams(max_width=10.0)),
+        ([(+1, 90, 40, 2), (-1, 90, 60, 5)], pp.BodyParams(min_count=3.0)),
+        ([(+1, 90, 40, 5), (+1, 90, 60, 5)], pp.BodyParams()),  # same polarity
+    ],
+)
+def test_body_conditions_reject(lines, params):
+    pos, neg = _counts(*lines)
+    assert not bool(pp.find_body(params, pos, neg, THETA, RHO, t=0.0).valid)
+
+
+def test_spike_counts_and_entry():
+    spikes = jnp.zeros((3, 4, 5, 6), jnp.int32)  # (updates, a, b, r)
+    spikes = spikes.at[0, 1, 2, 3].set(1).at[1, 1, 2, 3].set(-1).at[2, 1, 2, 3].set(1).at[0, 0, 0, 0].set(1)
+    positive, negative = pp.spike_counts(spikes, n_grid_axes=3)
+    assert float(positive[1, 2, 3]) == 2 and float(negative[1, 2, 3]) == 1
+    entry = pp.find_entry(positive + negative, jnp.arange(4) * 2.0, jnp.arange(5), jnp.arange(6) + 10.0, t=1.0)
+    assert bool(entry.valid) and int(entry.kind) == pp.ENTRY
+    assert float(entry.pos) == 2.0 and float(entry.width) == 26.0 and float(entry.score) == 3.0
+    empty = pp.find_entry(jnp.zeros((4, 5, 6)), jnp.arange(4.0), jnp.arange(5.0), jnp.arange(6.0), t=0.0)
+    assert not bool(empty.valid)
+
+
+def test_find_body_vmaps_like_a_loop():
+    grids = [_counts((+1, 90, 20 + i, 3), (-1, 90, 40 + 2 * i, 3)) for i in range(4)]
+    pos = jnp.stack([g[0] for g in grids])
+    neg = jnp.stack([g[1] for g in grids])
+    batched = jax.vmap(pp.find_body, in_axes=(None, 0, 0, None, None, None))(pp.BodyParams(), pos, neg, THETA, RHO, 0.0)
+    for i in range(4):
+        one = pp.find_body(pp.BodyParams(), pos[i], neg[i], THETA, RHO, 0.0)
+        np.testing.assert_allclose(batched.width[i], one.width)
+        np.testing.assert_allclose(batched.pos[i], one.pos)
+    np.testing.assert_allclose(batched.width, [20, 21, 22, 23])
+
+
+# --- Alg. 3 ------------------------------------------------------------------
+
+FOCAL = 0.5 * 128 / math.tan(math.radians(30.0))  # 60 degree field of view
+
+
+def test_eq8_distance_from_known_size():
+    assert float(pp.distance_from_size(20.0, FOCAL, 0.2)) == pytest.approx(FOCAL * 0.2 / 20.0)
+
+
+def test_eq9_distance_from_expansion_is_exact_for_a_pinhole():
+    f_l, v = FOCAL * 0.2, 0.05  # pipe 0.2 m wide, approached at 5 cm/s
+    d1, dt = 3.0, 4.0
+    d2 = d1 - v * dt
+    estimate = pp.distance_from_expansion(f_l / d1, f_l / d2, dt, v)
+    assert float(estimate) == pytest.approx(d2, rel=1e-6)
+    assert float(pp.distance_from_expansion(10.0, 10.0, dt, v)) == 0.0  # no growth: unknown
+
+
+def _approach(n, v=0.05, d0=3.0, dt=0.5, l=0.2):
+    t = jnp.arange(n) * dt
+    d = d0 - v * t
+    width = FOCAL * l / d
+    return t, d, width
+
+
+def test_track_with_unknown_size_uses_the_detection_ten_valid_ones_earlier():
+    t, d, width = _approach(30)
+    valid = jnp.ones(30, bool).at[jnp.array([3, 12, 13])].set(False)
+    pipes = pp.Pipe(t, jnp.full(30, math.pi / 2), width, jnp.full(30, 64.0), jnp.zeros(30, jnp.int32), jnp.ones(30), valid)
+    params = pp.track_params(fov=math.radians(60.0), speed=0.05)
+    est = jax.jit(pp.track)(params, pipes)
+    rank = np.cumsum(np.asarray(valid)) - 1  # index among valid detections
+    expect = np.where(np.asarray(valid) & (rank >= 10), np.asarray(d), 0.0)
+    np.testing.assert_allclose(est.distance, expect, rtol=1e-4)
+    assert int(np.sum(expect > 0)) == 17  # 27 valid detections, the first 10 unknown
+
+
+def test_track_with_known_size_and_pipe_offset_from_projection():
+    # A pipe centred X = 0.3 m to the right at depth d: pinhole column 64 + f X / d.
+    t, d, _ = _approach(5)
+    width = FOCAL * 0.2 / d
+    pos = 64.0 + FOCAL * 0.3 / d
+    pipes = pp.Pipe(t, jnp.full(5, math.pi / 2), width, pos, jnp.zeros(5, jnp.int32), jnp.ones(5), jnp.ones(5, bool))
+    est = pp.track(pp.track_params(size=0.2), pipes)
+    np.testing.assert_allclose(est.distance, d, rtol=1e-5)
+    np.testing.assert_allclose(est.pipe_offset, 0.3, rtol=1e-5)
+    np.testing.assert_array_equal(est.control, 1)  # right of the central line: turn right
+    left = pp.track(pp.track_params(size=0.2), pipes._replace(pos=128.0 - pos))
+    np.testing.assert_array_equal(left.control, -1)
+
+
+def test_eq4_to_6_camera_offset_is_the_phase_shifted_swing():
+    a, omega, phi = 0.6, 2.0 * math.pi * 0.5, 0.3
+    amplitude, alpha, phi_pos = 1.4, 2.571, 0.908  # the paper's NRP tuple
+    t = jnp.linspace(0.0, 4.0, 50)
+    angle = pp.head_joint_angle(t, a, omega, phi)
+    velocity = jax.vmap(jax.grad(pp.head_joint_angle), in_axes=(0, None, None, None))(t, a, omega, phi)
+    got = pp.camera_offset(angle, velocity, amplitude, alpha, phi_pos, omega)
+    expect = amplitude * jnp.sin(alpha * a * jnp.sin(omega * t + phi + phi_pos))
+    np.testing.assert_allclose(got, expect, atol=1e-5)
+
+
+def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
+    params = pp.track_params(size=0.2, swing_amplitude=0.1, swing_ratio=1.0, swing_phase=0.0)
+    pipe = pp.Pipe(*(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True))
+    # Camera swung to the left of the central line (negative offset): the pipe straight
+    # ahead of the camera is left of the central line too.
+    _, est = pp.track_step(params, pp.track_init(), pipe, -0.5, 0.0)
+    assert float(est.pipe_offset) == 0.0
+    np.testing.assert_allclose(float(est.camera_offset), 0.1 * math.sin(-0.5), rtol=1e-6)
+    assert int(est.control) == -1
+
+
+def test_track_vmaps_over_streams():
+    t, _, width = _approach(12)
+    ones = jnp.ones(12)
+    pipes = pp.Pipe(t, ones, width, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool))
+    batch = jax.tree.map(lambda x: jnp.stack([x, x]), pipes)
+    speeds = jnp.array([0.05, 0.10])
+    params = jax.vmap(lambda v: pp.track_params(speed=0.0)._replace(speed=v))(speeds)
+    est = jax.vmap(pp.track)(params, batch)
+    np.testing.assert_allclose(est.distance[1, 10:], 2.0 * est.distance[0, 10:], rtol=1e-5)
