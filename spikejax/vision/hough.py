@@ -1,0 +1,606 @@
+"""Spiking Hough grids: line and circle detectors built of bipolar LIF neurons.
+
+The snake pipe-tracking paper (Jiang et al. 2019, Section 2.2) detects lines and
+circles in a DVS event stream with a two-layer spiking network: every input
+pixel is wired to the output neurons of the Hough parameter space that a shape
+through that pixel would excite, and each output neuron is the extended bipolar
+LIF neuron of Alg. 1 with 3 x 3 (3 x 3 x 3 for circles) lateral inhibition
+(Section 2.2.3). This module holds the grids, their vote accumulators and the
+two ways of running the neurons.
+
+Grids (static, hashable configurations; a change recompiles):
+
+* :class:`LineGrid`: Eq. (2), ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)``
+  with ``theta_k = k * 180 / n_theta`` degrees, ``k = 0 .. n_theta - 1``, and rho
+  bins of ``rho_step`` pixels. Shape ``(n_theta, n_rho)``, 180 x 180 for a
+  128 x 128 sensor as in the paper. ``theta = 90`` degrees is a vertical line
+  ``x = ox + rho``; ``theta = 0`` a horizontal line ``y = oy + rho``.
+* :class:`CircleGrid`: Eq. (3), ``(x - a)^2 + (y - b)^2 = r^2`` with the centre
+  ``(a, b)`` on the sensor's pixels and radii ``r_k = r_min + k * r_step``. Shape
+  ``(n_r, height, width)`` -- radius, centre row ``b``, centre column ``a`` --
+  the layout of :func:`skimage.transform.hough_circle`; 64 x 128 x 128 for the
+  paper's 128 x 128 x 64 grid.
+
+Neurons (Alg. 1): a neuron's potential decays linearly toward 0 at ``decay``
+units per second, ``v <- sign(v) max(|v| - decay (t - t_last), 0)``; an input
+spike adds its polarity; when ``|v| >= v_th`` the neuron emits a spike of sign
+``sign(v)`` and it and its 3 x 3 (x 3) neighbourhood are reset to 0. Two modes,
+both written for one stream (``jax.vmap`` adds streams):
+
+* :func:`async_step` / :func:`async_run`: events one at a time in time order, each
+  updating only the cells it votes for (Alg. 1 and the inner loops of Alg. 2
+  exactly, see :func:`async_step`). The decay is lazy: every cell keeps the time
+  of its last update, so the decay is exact and costs only the cells touched.
+* :func:`sync_step` / :func:`sync_run`: all events of a time slot are voted at
+  once (:func:`votes`), then every neuron makes one Alg. 1 update at the slot's
+  time with the summed votes as its input -- the paper's GPU mode (Section 2.5).
+
+Both return, per time slot, the grid of output spikes with values in
+``{-1, 0, +1}``: the sign of the last spike each neuron emitted in the slot.
+
+The two modes differ only when events are dense in time: synchronously, votes
+of one slot are summed before any neuron is tested, so a neuron can overshoot
+the threshold (``|v| >= v_th`` by more than one vote), opposite votes within a
+slot cancel before they can fire, the decay within a slot is ignored, and the
+inhibition of a spike acts at the end of the slot rather than on the later
+events of the slot. With at most one event per slot they agree exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spikejax.errors import UserError
+from spikejax.vision.events import Events
+
+__all__ = [
+    "LineGrid",
+    "CircleGrid",
+    "HoughParams",
+    "HoughState",
+    "hough_params",
+    "init",
+    "line_table",
+    "ring_offsets",
+    "line_votes",
+    "circle_votes",
+    "votes",
+    "sync_step",
+    "sync_run",
+    "async_step",
+    "async_run",
+]
+
+
+def _round_half_away(v: np.ndarray) -> np.ndarray:
+    """C's ``round``: nearest integer, ties away from zero (what scikit-image uses)."""
+    r = np.rint(v)
+    tie = np.abs(v - np.trunc(v)) == 0.5
+    return np.where(tie, np.trunc(v) + np.sign(v), r)
+
+
+@dataclasses.dataclass(frozen=True)
+class LineGrid:
+    """The (theta, rho) parameter space of Eq. (2).
+
+    Attributes:
+        width, height: sensor size, pixels.
+        n_theta: angles ``theta_k = k * 180 / n_theta`` degrees (180: 1 degree).
+        n_rho: rho bins.
+        rho_step: bin width, pixels. Bin ``j`` holds the rho that round to
+            ``(j - rho_offset) * rho_step`` (ties away from zero).
+        origin: ``(ox, oy)``, the pixel the distances are measured from. Default
+            ``(width / 2, height / 2)``: then ``|rho| <= 90`` on a 128 x 128
+            sensor and the paper's 180 bins of 1 pixel hold every line.
+        rho_offset: bin of ``rho = 0``; default ``n_rho // 2``.
+
+    Votes that fall outside the bins are dropped (with the defaults on a
+    128 x 128 sensor only the corner pixel ``(0, 0)`` at 44-46 degrees, where
+    ``rho = -90.5``).
+    """
+
+    width: int = 128
+    height: int = 128
+    n_theta: int = 180
+    n_rho: int = 180
+    rho_step: float = 1.0
+    origin: tuple[float, float] | None = None
+    rho_offset: int | None = None
+
+    def __post_init__(self):
+        for name in ("width", "height", "n_theta", "n_rho"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, np.integer)) and value > 0):
+                raise UserError(f"LineGrid.{name} must be a positive integer, not {value!r}")
+        if not self.rho_step > 0:
+            raise UserError(f"LineGrid.rho_step must be > 0 pixels, not {self.rho_step!r}")
+        if self.origin is None:
+            object.__setattr__(self, "origin", (self.width / 2, self.height / 2))
+        else:
+            object.__setattr__(self, "origin", tuple(float(o) for o in self.origin))
+        if self.rho_offset is None:
+            object.__setattr__(self, "rho_offset", self.n_rho // 2)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.n_theta, self.n_rho)
+
+    @property
+    def size(self) -> int:
+        return self.n_theta * self.n_rho
+
+    def thetas(self) -> np.ndarray:
+        """Angles of the rows, radians, ``(n_theta,)``."""
+        return np.arange(self.n_theta) * (np.pi / self.n_theta)
+
+    def rhos(self) -> np.ndarray:
+        """Centre of each rho bin, pixels, ``(n_rho,)``."""
+        return (np.arange(self.n_rho) - self.rho_offset) * self.rho_step
+
+    def skimage_thetas(self) -> np.ndarray:
+        """The angles to give :func:`skimage.transform.hough_line` for the same lines.
+
+        scikit-image writes ``rho = x cos(phi) + y sin(phi)`` from the top-left
+        pixel, Eq. (2) writes ``rho = x sin(theta) + y cos(theta)``: the same line
+        has ``phi = pi / 2 - theta``. With ``origin=(0, 0)``, ``rho_step=1`` and
+        ``rho_offset = ceil(hypot(height, width))`` (``n_rho = 2 rho_offset + 1``),
+        row ``k`` of our accumulator is column ``k`` of scikit-image's, bin for bin.
+        """
+        return np.pi / 2 - self.thetas()
+
+    def cell(self, theta: float, rho: float) -> tuple[int, int]:
+        """``(theta_index, rho_index)`` of the cell nearest to a line (radians, pixels).
+
+        ``theta`` is taken modulo pi (``(theta + pi, -rho)`` is the same line).
+        """
+        theta = float(theta) % (2 * np.pi)
+        if theta >= np.pi:
+            theta, rho = theta - np.pi, -rho
+        k = int(round(theta / (np.pi / self.n_theta)))
+        if k == self.n_theta:
+            k, rho = 0, -rho
+        j = int(_round_half_away(np.asarray(rho / self.rho_step))) + self.rho_offset
+        return k, j
+
+    def line(self, theta_index, rho_index) -> tuple[np.ndarray, np.ndarray]:
+        """``(theta, rho)`` (radians, pixels) of cells given by their indices."""
+        theta_index = np.asarray(theta_index)
+        rho_index = np.asarray(rho_index)
+        return theta_index * (np.pi / self.n_theta), (rho_index - self.rho_offset) * self.rho_step
+
+
+@dataclasses.dataclass(frozen=True)
+class CircleGrid:
+    """The (a, b, r) parameter space of Eq. (3).
+
+    Attributes:
+        width, height: sensor size, pixels; the centres ``(a, b)`` are its pixels.
+        n_r: radii ``r_k = r_min + k * r_step``.
+        r_min: smallest radius, pixels.
+        r_step: radius step, pixels.
+
+    An event at ``(x, y)`` votes for ``(a, b, r_k)`` when its distance to the
+    centre rounds to ``r_k`` in steps of ``r_step``:
+    ``round((hypot(x - a, y - b) - r_min) / r_step) == k`` (ties away from zero).
+    """
+
+    width: int = 128
+    height: int = 128
+    n_r: int = 64
+    r_min: float = 1.0
+    r_step: float = 1.0
+
+    def __post_init__(self):
+        for name in ("width", "height", "n_r"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, np.integer)) and value > 0):
+                raise UserError(f"CircleGrid.{name} must be a positive integer, not {value!r}")
+        if not self.r_min > 0:
+            raise UserError(f"CircleGrid.r_min must be > 0 pixels, not {self.r_min!r}")
+        if not self.r_step > 0:
+            raise UserError(f"CircleGrid.r_step must be > 0 pixels, not {self.r_step!r}")
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (self.n_r, self.height, self.width)
+
+    @property
+    def size(self) -> int:
+        return self.n_r * self.height * self.width
+
+    def radii(self) -> np.ndarray:
+        """Radius of each plane, pixels, ``(n_r,)``."""
+        return self.r_min + np.arange(self.n_r) * self.r_step
+
+    def r_max(self) -> float:
+        """Largest distance that still votes, pixels."""
+        return self.r_min + (self.n_r - 0.5) * self.r_step
+
+
+Grid = LineGrid | CircleGrid
+
+
+class HoughParams(NamedTuple):
+    """Parameters of the extended bipolar LIF neurons of Alg. 1.
+
+    Attributes:
+        v_th: firing threshold, in votes (> 1: one vote alone never fires).
+        decay: the decay rate lambda of Alg. 1, votes per second.
+    """
+
+    v_th: jax.Array
+    decay: jax.Array
+
+
+def hough_params(v_th=8.0, decay=50.0) -> HoughParams:
+    """:class:`HoughParams` as float32 arrays (the paper gives no values)."""
+    return HoughParams(jnp.asarray(v_th, jnp.float32), jnp.asarray(decay, jnp.float32))
+
+
+class HoughState(NamedTuple):
+    """Membrane potentials of a grid and the time each was last updated.
+
+    Attributes:
+        v: potentials, ``grid.shape``.
+        t: time of each neuron's last update, seconds, ``grid.shape``.
+    """
+
+    v: jax.Array
+    t: jax.Array
+
+
+def init(grid: Grid, t0=0.0) -> HoughState:
+    """A grid at rest (``v = 0``) at time ``t0``."""
+    return HoughState(jnp.zeros(grid.shape, jnp.float32), jnp.full(grid.shape, t0, jnp.float32))
+
+
+# --- static wiring -------------------------------------------------------------
+
+
+@functools.cache
+def line_table(grid: LineGrid) -> np.ndarray:
+    """Which cell each pixel votes for at each angle: ``(height * width, n_theta)`` int32.
+
+    Entry ``[y * width + x, k]`` is the flat cell index ``k * n_rho + j`` of the rho
+    bin ``j`` of pixel ``(x, y)`` at ``theta_k``, or ``grid.size`` when the bin is
+    outside the grid. Computed once per grid in float64, with the trigonometric
+    values of :meth:`LineGrid.skimage_thetas`, so that it agrees with
+    scikit-image bin for bin.
+    """
+    phi = grid.skimage_thetas()
+    sin_t, cos_t = np.cos(phi), np.sin(phi)  # sin(theta), cos(theta)
+    y, x = np.divmod(np.arange(grid.height * grid.width), grid.width)
+    ox, oy = grid.origin
+    rho = (x[:, None] - ox) * sin_t[None, :] + (y[:, None] - oy) * cos_t[None, :]
+    if grid.rho_step != 1.0:
+        rho = rho / grid.rho_step
+    j = _round_half_away(rho).astype(np.int64) + grid.rho_offset
+    inside = (j >= 0) & (j < grid.n_rho)
+    flat = np.arange(grid.n_theta)[None, :] * grid.n_rho + j
+    return np.where(inside, flat, grid.size).astype(np.int32)
+
+
+@functools.cache
+def ring_offsets(grid: CircleGrid) -> np.ndarray:
+    """The cells one event votes for, as offsets: ``(m, 3)`` int32 rows ``(k, db, da)``.
+
+    An event at ``(x, y)`` votes for centre ``(x + da, y + db)`` at radius index
+    ``k`` (the rings of :class:`CircleGrid`); ordered by ``k``, then ``db``, ``da``.
+    """
+    reach = int(math.floor(grid.r_max()))
+    d = np.arange(-reach, reach + 1)
+    db, da = np.meshgrid(d, d, indexing="ij")
+    k = _round_half_away((np.hypot(da, db) - grid.r_min) / grid.r_step)
+    rows = []
+    for i in range(grid.n_r):
+        sel = k == i
+        rows.append(np.stack([np.full(sel.sum(), i), db[sel], da[sel]], axis=1))
+    return np.concatenate(rows).astype(np.int32)
+
+
+# --- votes ---------------------------------------------------------------------
+
+
+def _weights(events: Events, signed: bool) -> jax.Array:
+    w = events.p.astype(jnp.float32) if signed else jnp.ones(events.p.shape, jnp.float32)
+    return jnp.where(events.valid, w, 0.0)
+
+
+def _pixel(grid, events: Events) -> tuple[jax.Array, jax.Array]:
+    """Flat pixel index of each event and whether it lies on the sensor."""
+    on = (events.x >= 0) & (events.x < grid.width) & (events.y >= 0) & (events.y < grid.height)
+    pixel = jnp.where(on, events.y * grid.width + events.x, 0)
+    return pixel, on & events.valid
+
+
+def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Array:
+    """The line accumulator of a set of events: ``grid.shape`` float32.
+
+    Each valid event adds its polarity (``signed``) or 1 to the cell of its rho
+    at every angle (the wiring of Section 2.2.1). With ``signed=False``,
+    ``origin=(0, 0)`` and the bins of :meth:`LineGrid.skimage_thetas`, the
+    accumulator of the events at the nonzero pixels of a binary image is
+    ``skimage.transform.hough_line(image, grid.skimage_thetas())[0].T``.
+    """
+    table = jnp.asarray(line_table(grid))
+    pixel, ok = _pixel(grid, events)
+    w = jnp.where(ok, _weights(events, signed), 0.0)
+    cells = table[pixel]  # (capacity, n_theta)
+    acc = jnp.zeros((grid.size + 1,), jnp.float32)
+    acc = acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta))
+    return acc[: grid.size].reshape(grid.shape)
+
+
+def event_image(grid, events: Events, *, signed: bool = True) -> jax.Array:
+    """Sum of the events' polarities (or counts) per pixel: ``(height, width)`` float32."""
+    pixel, ok = _pixel(grid, events)
+    w = jnp.where(ok, _weights(events, signed), 0.0)
+    image = jnp.zeros((grid.height * grid.width,), jnp.float32).at[pixel].add(w)
+    return image.reshape(grid.height, grid.width)
+
+
+def _fft_size(n: int, reach: int) -> int:
+    """Smallest 2^i 3^j 5^k >= n + reach: a circular convolution of that size has no wrap-around."""
+    need = n + reach
+    best = None
+    for i in range(12):
+        for j in range(8):
+            for k in range(6):
+                v = 2**i * 3**j * 5**k
+                if v >= need and (best is None or v < best):
+                    best = v
+    return best
+
+
+@functools.cache
+def _ring_kernels(grid: CircleGrid) -> tuple[np.ndarray, int, int]:
+    """Ring kernels laid out for a circular convolution: ``(n_r, ny, nx)`` float32."""
+    reach = int(math.floor(grid.r_max()))
+    ny, nx = _fft_size(grid.height, reach), _fft_size(grid.width, reach)
+    offsets = ring_offsets(grid)
+    kernels = np.zeros((grid.n_r, ny, nx), np.float32)
+    # An event at (x, y) votes for the centre (x + da, y + db): the kernel is the
+    # ring itself, placed at (db mod ny, da mod nx).
+    kernels[offsets[:, 0], offsets[:, 1] % ny, offsets[:, 2] % nx] = 1.0
+    return kernels, ny, nx
+
+
+def circle_votes(grid: CircleGrid, events: Events, *, signed: bool = True, method: str = "fft") -> jax.Array:
+    """The circle accumulator of a set of events: ``grid.shape`` float32.
+
+    Each valid event adds its polarity (``signed``) or 1 to every cell
+    ``(k, b, a)`` whose ring passes through it (Section 2.2.2). ``method`` picks the
+    formulation; both give the same integers:
+
+    * ``"fft"``: the event image convolved with each ring (one real FFT of the
+      image, one product and one inverse FFT per radius); cost independent of
+      the number of events.
+    * ``"scatter"``: every event adds to its ring cells one by one
+      (:func:`ring_offsets`); cost proportional to events times ring cells.
+    """
+    if method == "fft":
+        kernels, ny, nx = _ring_kernels(grid)
+        image = event_image(grid, events, signed=signed)
+        spectrum = jnp.fft.rfft2(image, s=(ny, nx))
+        rings = jnp.fft.rfft2(jnp.asarray(kernels))
+        out = jnp.fft.irfft2(rings * spectrum[None], s=(ny, nx))
+        return jnp.round(out[:, : grid.height, : grid.width])
+    if method == "scatter":
+        offsets = jnp.asarray(ring_offsets(grid))
+        pixel, ok = _pixel(grid, events)
+        w = jnp.where(ok, _weights(events, signed), 0.0)
+        flat, inside = _ring_cells(grid, offsets, events.x[:, None], events.y[:, None])
+        flat = jnp.where(inside, flat, grid.size)
+        acc = jnp.zeros((grid.size + 1,), jnp.float32)
+        acc = acc.at[flat.reshape(-1)].add(jnp.broadcast_to(w[:, None], flat.shape).reshape(-1))
+        return acc[: grid.size].reshape(grid.shape)
+    raise UserError(f"unknown circle vote method {method!r}; choose 'fft' or 'scatter'")
+
+
+def _ring_cells(grid: CircleGrid, offsets: jax.Array, x, y):
+    """Flat cell indices of the rings around pixels ``(x, y)`` and whether they are on the grid."""
+    a = x + offsets[:, 2]
+    b = y + offsets[:, 1]
+    inside = (a >= 0) & (a < grid.width) & (b >= 0) & (b < grid.height)
+    flat = (offsets[:, 0] * grid.height + b) * grid.width + a
+    return flat, inside
+
+
+def votes(grid: Grid, events: Events, *, signed: bool = True) -> jax.Array:
+    """The accumulator of ``grid`` for a set of events (:func:`line_votes` or :func:`circle_votes`)."""
+    if isinstance(grid, LineGrid):
+        return line_votes(grid, events, signed=signed)
+    if isinstance(grid, CircleGrid):
+        return circle_votes(grid, events, signed=signed)
+    raise UserError(f"not a Hough grid: {type(grid).__name__}")
+
+
+# --- neurons -------------------------------------------------------------------
+
+
+def _decay(v, amount):
+    """Alg. 1, line 2: ``sign(v) * max(|v| - amount, 0)``."""
+    return jnp.sign(v) * jnp.maximum(jnp.abs(v) - amount, 0.0)
+
+
+def _neighbourhood(fired: jax.Array) -> jax.Array:
+    """Cells within one step (3 x 3, or 3 x 3 x 3) of a fired cell; the grid does not wrap."""
+    ones = (3,) * fired.ndim
+    return jax.lax.reduce_window(fired, False, jax.lax.bitwise_or, ones, (1,) * fired.ndim, "SAME")
+
+
+def sync_step(
+    params: HoughParams, grid: Grid, state: HoughState, events: Events, t
+) -> tuple[HoughState, jax.Array]:
+    """One synchronous update of the whole grid at time ``t`` (the paper's GPU mode).
+
+    All events of the slot are voted at once (:func:`votes`, signed by polarity);
+    then every neuron makes one Alg. 1 update: decay by ``decay * (t - t_last)``,
+    add its summed votes, fire with the sign of ``v`` where ``|v| >= v_th``; the
+    3 x 3 (x 3) neighbourhoods of the fired neurons are reset to 0.
+
+    Returns:
+        ``(state, spikes)``: spikes of shape ``grid.shape``, int8 in ``{-1, 0, +1}``.
+    """
+    t = jnp.asarray(t, jnp.float32)
+    v = _decay(state.v, params.decay * (t - state.t)) + votes(grid, events)
+    fired = jnp.abs(v) >= params.v_th
+    spikes = jnp.where(fired, jnp.sign(v), 0.0).astype(jnp.int8)
+    v = jnp.where(_neighbourhood(fired), 0.0, v)
+    return HoughState(v, jnp.full_like(state.t, t)), spikes
+
+
+def sync_run(
+    params: HoughParams, grid: Grid, events: Events, times, state: HoughState | None = None
+) -> tuple[HoughState, jax.Array]:
+    """:func:`sync_step` over time slots.
+
+    Args:
+        params: neuron parameters.
+        grid: the grid (static).
+        events: :class:`Events` with leaves ``(n_slots, capacity)``, one row per slot.
+        times: ``(n_slots,)`` the time of each slot's update, seconds (its end).
+        state: the starting state (default: :func:`init` at ``times[0]``).
+
+    Returns:
+        ``(state, spikes)``, spikes ``(n_slots, *grid.shape)`` int8.
+    """
+    times = jnp.asarray(times, jnp.float32)
+    if state is None:
+        state = init(grid, times[0])
+
+    def body(state, slot):
+        ev, t = slot
+        return sync_step(params, grid, state, ev, t)
+
+    return jax.lax.scan(body, state, (events, times))
+
+
+def _first_of_runs(cross: jax.Array, adjacent: jax.Array) -> jax.Array:
+    """Which crossings fire when the cells of one event are updated in order.
+
+    Cell ``j`` fires if it crosses the threshold and was not just reset by cell
+    ``j - 1`` firing next to it (``adjacent[j - 1]``). Along a run of crossing,
+    adjacent cells the fires therefore alternate, starting with the first.
+    """
+    n = cross.shape[0]
+    index = jnp.arange(n)
+    link = jnp.concatenate([jnp.zeros((1,), bool), cross[:-1] & adjacent & cross[1:]])
+    start = jax.lax.cummax(jnp.where(link, 0, index))
+    return cross & ((index - start) % 2 == 0)
+
+
+def _line_event(params, grid: LineGrid, table, carry, event):
+    """Alg. 1 for the ``n_theta`` cells one event votes for, in the order of Alg. 2."""
+    v, t_last, out = carry
+    x, y, t, p, valid = event
+    n_rho, size = grid.n_rho, grid.size
+    on = valid & (x >= 0) & (x < grid.width) & (y >= 0) & (y < grid.height)
+    cells = table[jnp.where(on, y * grid.width + x, 0)]
+    ok = on & (cells < size)
+    cells = jnp.where(ok, cells, size)
+    pol = p.astype(jnp.float32)
+    new = _decay(v[cells], params.decay * (t - t_last[cells])) + pol
+    cross = ok & (jnp.abs(new) >= params.v_th)
+    rho = cells - jnp.arange(grid.n_theta) * n_rho
+    adjacent = ok[:-1] & ok[1:] & (jnp.abs(rho[1:] - rho[:-1]) <= 1)
+    fired = _first_of_runs(cross, adjacent)
+    # A cell right after an adjacent fired cell was reset before its own update.
+    reset_before = jnp.concatenate([jnp.zeros((1,), bool), fired[:-1] & adjacent])
+    reset_after = jnp.concatenate([fired[1:] & adjacent, jnp.zeros((1,), bool)])
+    value = jnp.where(reset_before, pol, new)
+    value = jnp.where(fired | reset_after, 0.0, value)
+    # Inhibition: the 3 x 3 neighbourhood of each fired cell, then the event's own cells.
+    k = jnp.arange(grid.n_theta)
+    dk, dj = jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij")
+    nk = k[:, None] + dk.reshape(-1)[None, :]
+    nj = rho[:, None] + dj.reshape(-1)[None, :]
+    inside = fired[:, None] & (nk >= 0) & (nk < grid.n_theta) & (nj >= 0) & (nj < n_rho)
+    v = v.at[jnp.where(inside, nk * n_rho + nj, size).reshape(-1)].set(0.0)
+    v = v.at[cells].set(value)
+    t_last = t_last.at[cells].set(t)
+    out = out.at[jnp.where(fired, cells, size)].set(jnp.sign(new).astype(jnp.int8))
+    return v, t_last, out
+
+
+def _circle_event(params, grid: CircleGrid, offsets, carry, event):
+    """Alg. 1 for the ring cells one event votes for, all updated at once."""
+    v, t_last, out = carry
+    x, y, t, p, valid = event
+    size = grid.size
+    flat, inside = _ring_cells(grid, offsets, x, y)
+    ok = valid & inside
+    cells = jnp.where(ok, flat, size)
+    new = _decay(v[cells], params.decay * (t - t_last[cells])) + p.astype(jnp.float32)
+    fired = ok & (jnp.abs(new) >= params.v_th)
+    v = v.at[cells].set(jnp.where(fired, 0.0, new))
+    t_last = t_last.at[cells].set(t)
+    out = out.at[jnp.where(fired, cells, size)].set(jnp.sign(new).astype(jnp.int8))
+
+    def inhibit(v):
+        fired_grid = jnp.zeros((size + 1,), bool).at[cells].max(fired)[:size].reshape(grid.shape)
+        return jnp.where(_neighbourhood(fired_grid).reshape(-1), 0.0, v[:size]).reshape(-1)
+
+    v = jnp.concatenate([jax.lax.cond(jnp.any(fired), inhibit, lambda v: v[:size], v), v[size:]])
+    return v, t_last, out
+
+
+def async_step(
+    params: HoughParams, grid: Grid, state: HoughState, events: Events
+) -> tuple[HoughState, jax.Array]:
+    """Feed one slot's events one at a time, in the order given (time order), through Alg. 1.
+
+    Each event updates only the cells it votes for, at its own time stamp: the
+    lazy decay makes the potentials exactly those of Alg. 1. For a
+    :class:`LineGrid` the ``n_theta`` cells of an event are visited in the order
+    of Alg. 2 (increasing theta): a cell that fires resets its 3 x 3
+    neighbourhood at once, so the next angle's cell, if adjacent, starts from 0
+    (computed without a loop, by :func:`_first_of_runs`). For a
+    :class:`CircleGrid` all ring cells of an event are updated together and
+    then the 3 x 3 x 3 neighbourhoods of those that fired are reset.
+
+    Returns:
+        ``(state, spikes)``: spikes of shape ``grid.shape``, int8, the sign of the
+        last spike of each neuron during the slot (0 if it did not fire).
+    """
+    size = grid.size
+    pad = lambda a, fill: jnp.concatenate([a.reshape(-1), jnp.full((1,), fill, a.dtype)])
+    carry = (pad(state.v, 0.0), pad(state.t, 0.0), jnp.zeros((size + 1,), jnp.int8))
+    if isinstance(grid, LineGrid):
+        wiring = jnp.asarray(line_table(grid))
+        step = functools.partial(_line_event, params, grid, wiring)
+    elif isinstance(grid, CircleGrid):
+        wiring = jnp.asarray(ring_offsets(grid))
+        step = functools.partial(_circle_event, params, grid, wiring)
+    else:
+        raise UserError(f"not a Hough grid: {type(grid).__name__}")
+    (v, t_last, out), _ = jax.lax.scan(lambda c, e: (step(c, e), None), carry, tuple(events))
+    state = HoughState(v[:size].reshape(grid.shape), t_last[:size].reshape(grid.shape))
+    return state, out[:size].reshape(grid.shape)
+
+
+def async_run(
+    params: HoughParams, grid: Grid, events: Events, state: HoughState | None = None
+) -> tuple[HoughState, jax.Array]:
+    """:func:`async_step` over time slots.
+
+    Args:
+        params: neuron parameters.
+        grid: the grid (static).
+        events: :class:`Events` with leaves ``(n_slots, capacity)``, each row in
+            time order, rows consecutive in time.
+        state: the starting state (default: :func:`init` at time 0).
+
+    Returns:
+        ``(state, spikes)``, spikes ``(n_slots, *grid.shape)`` int8.
+    """
+    if state is None:
+        state = init(grid)
+    return jax.lax.scan(lambda s, ev: async_step(params, grid, s, ev), state, events)
