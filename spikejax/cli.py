@@ -21,6 +21,10 @@ REPRODUCTIONS = {
     "robobee-learning": "robots.robobee.reproduce:main_learning",
     "robobee-populations": "robots.robobee.reproduce:main_populations",
 }
+# ``spikejax detect TARGET FILE``: "module:function".
+DETECTORS = {
+    "pipe": "spikejax.vision.detect:main",
+}
 BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",
     "robobee-network": "robots.robobee.bench_network:main_network",
@@ -56,6 +60,24 @@ def _build_parser() -> argparse.ArgumentParser:
     be.add_argument("--trials", type=int, default=None, help="trials to time")
     be.add_argument("--out", default=None, help="write the figures as CSV here")
 
+    det = sub.add_parser("detect", help="detect shapes in an event recording")
+    det_sub = det.add_subparsers(dest="target", required=True)
+    pipe = det_sub.add_parser("pipe", help="pipe bodies and entries (spiking Hough, Alg. 2-3 of the pipe paper)")
+    pipe.add_argument("file", help="event recording: .npz, .npy (structured array x, y, t, p) or .aedat4")
+    pipe.add_argument("--mode", choices=("sync", "async"), default="sync", help="slots at once (default) or event by event")
+    pipe.add_argument("--out", default=None, help="write detections.csv and overlay.png here")
+    pipe.add_argument("--slot", type=float, default=0.02, help="time slot, s (default 0.02)")
+    pipe.add_argument("--sub-slots", type=int, default=5, help="updates per slot; a neuron fires at most once per update")
+    pipe.add_argument("--capacity", type=int, default=4096, help="events per update (the rest are counted)")
+    pipe.add_argument("--sensor-size", type=int, nargs=2, metavar=("W", "H"), default=None, help="default: the file's, else 128 128")
+    pipe.add_argument("--shapes", choices=("both", "lines", "circles"), default="both", help="bodies (lines), entries (circles)")
+    pipe.add_argument("--v-th", type=float, default=None, help="Hough neuron threshold, votes (default: half the sensor height)")
+    pipe.add_argument("--decay", type=float, default=50.0, help="decay rate lambda of Alg. 1, votes/s")
+    pipe.add_argument("--fov", type=float, default=60.0, help="horizontal field of view, degrees")
+    pipe.add_argument("--pipe-size", type=float, default=0.0, help="pipe diameter, m, if known (distance by Eq. 8)")
+    pipe.add_argument("--speed", type=float, default=0.0, help="forward speed, m/s (distance by Eq. 9 otherwise)")
+    pipe.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
     sub.add_parser("info", help="versions and devices")
     return parser
 
@@ -79,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
             from spikejax import sweep
 
             return sweep.main(args)
+        if args.command == "detect":
+            return int(_load(DETECTORS[args.target])(args) or 0)
         registry = REPRODUCTIONS if args.command == "reproduce" else BENCHMARKS
         return int(_load(registry[args.target])(args) or 0)
     except UserError as err:

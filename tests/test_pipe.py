@@ -68,15 +68,15 @@ def test_body_conditions_reject(lines, params):
 
 
 def test_spike_counts_and_entry():
-    spikes = jnp.zeros((3, 4, 5, 6), jnp.int32)  # (updates, a, b, r)
+    spikes = jnp.zeros((3, 4, 5, 6), jnp.int32)  # (updates, r, b, a)
     spikes = spikes.at[0, 1, 2, 3].set(1).at[1, 1, 2, 3].set(-1).at[2, 1, 2, 3].set(1).at[0, 0, 0, 0].set(1)
     positive, negative = pp.spike_counts(spikes, n_grid_axes=3)
     assert float(positive[1, 2, 3]) == 2 and float(negative[1, 2, 3]) == 1
-    entry = pp.find_entry(positive + negative, jnp.arange(4) * 2.0, jnp.arange(5), jnp.arange(6) + 10.0, t=1.0)
+    entry = pp.find_entry(positive + negative, jnp.arange(4) + 10.0, t=1.0)
     assert bool(entry.valid) and int(entry.kind) == pp.ENTRY
-    assert float(entry.pos) == 2.0 and float(entry.width) == 26.0 and float(entry.score) == 3.0
-    empty = pp.find_entry(jnp.zeros((4, 5, 6)), jnp.arange(4.0), jnp.arange(5.0), jnp.arange(6.0), t=0.0)
-    assert not bool(empty.valid)
+    assert float(entry.pos) == 3.0 and float(entry.row) == 2.0
+    assert float(entry.width) == 22.0 and float(entry.score) == 3.0
+    assert not bool(pp.find_entry(jnp.zeros((4, 5, 6)), jnp.arange(4.0), t=0.0).valid)
 
 
 def test_find_body_vmaps_like_a_loop():
@@ -119,7 +119,7 @@ def _approach(n, v=0.05, d0=3.0, dt=0.5, l=0.2):
 def test_track_with_unknown_size_uses_the_detection_ten_valid_ones_earlier():
     t, d, width = _approach(30)
     valid = jnp.ones(30, bool).at[jnp.array([3, 12, 13])].set(False)
-    pipes = pp.Pipe(t, jnp.full(30, math.pi / 2), width, jnp.full(30, 64.0), jnp.zeros(30, jnp.int32), jnp.ones(30), valid)
+    pipes = pp.Pipe(t, jnp.full(30, math.pi / 2), width, jnp.full(30, 64.0), jnp.full(30, 64.0), jnp.zeros(30, jnp.int32), jnp.ones(30), valid)
     params = pp.track_params(fov=math.radians(60.0), speed=0.05)
     est = jax.jit(pp.track)(params, pipes)
     rank = np.cumsum(np.asarray(valid)) - 1  # index among valid detections
@@ -133,7 +133,7 @@ def test_track_with_known_size_and_pipe_offset_from_projection():
     t, d, _ = _approach(5)
     width = FOCAL * 0.2 / d
     pos = 64.0 + FOCAL * 0.3 / d
-    pipes = pp.Pipe(t, jnp.full(5, math.pi / 2), width, pos, jnp.zeros(5, jnp.int32), jnp.ones(5), jnp.ones(5, bool))
+    pipes = pp.Pipe(t, jnp.full(5, math.pi / 2), width, pos, jnp.full(5, 64.0), jnp.zeros(5, jnp.int32), jnp.ones(5), jnp.ones(5, bool))
     est = pp.track(pp.track_params(size=0.2), pipes)
     np.testing.assert_allclose(est.distance, d, rtol=1e-5)
     np.testing.assert_allclose(est.pipe_offset, 0.3, rtol=1e-5)
@@ -155,7 +155,7 @@ def test_eq4_to_6_camera_offset_is_the_phase_shifted_swing():
 
 def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
     params = pp.track_params(size=0.2, swing_amplitude=0.1, swing_ratio=1.0, swing_phase=0.0)
-    pipe = pp.Pipe(*(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True))
+    pipe = pp.Pipe(*(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True))
     # Camera swung to the left of the central line (negative offset): the pipe straight
     # ahead of the camera is left of the central line too.
     _, est = pp.track_step(params, pp.track_init(), pipe, -0.5, 0.0)
@@ -167,7 +167,7 @@ def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
 def test_track_vmaps_over_streams():
     t, _, width = _approach(12)
     ones = jnp.ones(12)
-    pipes = pp.Pipe(t, ones, width, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool))
+    pipes = pp.Pipe(t, ones, width, 64.0 * ones, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool))
     batch = jax.tree.map(lambda x: jnp.stack([x, x]), pipes)
     speeds = jnp.array([0.05, 0.10])
     params = jax.vmap(lambda v: pp.track_params(speed=0.0)._replace(speed=v))(speeds)

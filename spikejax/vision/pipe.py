@@ -22,15 +22,18 @@ candidate spikes ``k`` and the Eq. (9) interval are static.
 
 Conventions
 -----------
-* Lines follow the paper's Eq. (2): ``rho = x sin(theta) + y cos(theta)``,
-  ``x`` the column, ``y`` the row (row 0 at the top), ``theta`` in
-  ``[0, pi)``. A vertical line ``x = x0`` has ``theta = pi/2``, ``rho = x0``.
-  :func:`find_body` takes the grid's ``theta`` and ``rho`` values per index, so
-  any grid that uses this equation (any resolution, signed ``rho``) fits.
+* Lines follow the paper's Eq. (2) measured from an origin ``(ox, oy)``:
+  ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)``, ``x`` the column, ``y``
+  the row (row 0 at the top), ``theta`` in ``[0, pi)``; the paper's origin is
+  the top-left pixel, :class:`~spikejax.vision.hough.LineGrid`'s default the
+  image centre. A vertical line ``x = ox + r`` has ``theta = pi/2``,
+  ``rho = r``. :func:`find_body` takes the grid's ``theta`` and ``rho`` values
+  per index, so any such grid (any resolution, signed ``rho``) fits.
 * ``pos`` is the column (pixels from the left edge of the image) where the
-  pipe's centre line crosses the middle row; ``w`` is the perpendicular
-  distance between the two edges, pixels. For an entry, ``pos`` is the ring
-  centre's column, ``w`` its diameter and ``theta`` 0.
+  pipe's centre line crosses the image's middle row; ``w`` is the
+  perpendicular distance between the two edges, pixels. For an entry, ``pos``
+  and ``row`` are the ring centre's column and row, ``w`` its diameter and
+  ``theta`` 0.
 * Lateral offsets are metres, positive to the right of the camera's optical
   axis (``pos`` right of the image centre) and of the robot's central line.
   ``C = +1`` means turn right, ``-1`` turn left, ``0`` go straight.
@@ -79,7 +82,8 @@ class Pipe(NamedTuple):
         t: time of the slot, s.
         theta: angle of the edges in Eq. (2)'s convention, rad (``pi/2`` upright).
         width: ``w``, pixels.
-        pos: column of the pipe's centre at the middle row, pixels from the left.
+        pos: column of the pipe's centre at ``row``, pixels from the left.
+        row: the middle row for a body, the ring centre's row for an entry.
         kind: :data:`BODY` (two parallel edges) or :data:`ENTRY` (a ring).
         score: output spikes behind the detection (the pair's smaller count
             for a body, the neuron's count for an entry).
@@ -90,6 +94,7 @@ class Pipe(NamedTuple):
     theta: jax.Array
     width: jax.Array
     pos: jax.Array
+    row: jax.Array
     kind: jax.Array
     score: jax.Array
     valid: jax.Array
@@ -133,11 +138,20 @@ def spike_counts(spikes: jax.Array, n_grid_axes: int = 2) -> tuple[jax.Array, ja
     return positive, negative
 
 
-def _column_at_row(theta, rho, row):
-    """Column where the line ``rho = x sin(theta) + y cos(theta)`` crosses ``row``."""
+def _fractions(strength, shape):
+    """Tie-breakers scaled into ``[0, 0.5]``, so that they never outweigh one spike."""
+    if strength is None:
+        zero = jnp.zeros(shape, jnp.float32)
+        return zero, zero
+    top = jnp.maximum(jnp.maximum(jnp.max(strength[0]), jnp.max(strength[1])), 1e-12)
+    return 0.5 * strength[0] / top, 0.5 * strength[1] / top
+
+
+def _column_at_row(theta, rho, origin, row):
+    """Column where the line ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)`` crosses ``row``."""
     s = jnp.sin(theta)
     s = jnp.where(jnp.abs(s) < 1e-6, 1e-6, s)
-    return (rho - row * jnp.cos(theta)) / s
+    return origin[0] + (rho - (row - origin[1]) * jnp.cos(theta)) / s
 
 
 def find_body(
@@ -147,7 +161,10 @@ def find_body(
     theta: jax.Array,
     rho: jax.Array,
     t: jax.Array | float,
-    image_height: int = 128,
+    *,
+    strength: tuple[jax.Array, jax.Array] | None = None,
+    origin: tuple[float, float] = (0.0, 0.0),
+    row: float = 64.0,
     k: int = 16,
 ) -> Pipe:
     """Alg. 2, line 11: the pipe body among a slot's line-grid output spikes.
@@ -160,6 +177,13 @@ def find_body(
     often, i.e. whose less active edge fired most (ties: the larger total),
     is the pipe.
 
+    When the grid reports at most one spike per neuron per update (the
+    synchronous mode fires every neuron over threshold at once), many
+    neighbouring neurons tie; ``strength`` then breaks the ties, both in the
+    choice of candidates and of the pair, without ever outranking a
+    difference in spike counts. :mod:`spikejax.vision.detect` passes the
+    slot's vote accumulator split by sign.
+
     Args:
         params: the judgment conditions.
         positive, negative: spike counts per neuron, shape ``(n_theta, n_rho)``
@@ -167,7 +191,10 @@ def find_body(
         theta: ``(n_theta,)`` angle of each grid row, rad, Eq. (2).
         rho: ``(n_rho,)`` distance of each grid column, pixels, Eq. (2).
         t: time stamp of the slot, s.
-        image_height: rows of the image; ``pos`` is read at its middle row.
+        strength: optional ``(positive, negative)`` tie-breakers of the
+            grid's shape, >= 0 (e.g. the votes of each sign in the slot).
+        origin: ``(ox, oy)``, the pixel the grid measures ``rho`` from.
+        row: the row at which ``pos`` is read (the image's middle row).
         k: candidates per polarity (static).
 
     Returns:
@@ -176,8 +203,11 @@ def find_body(
     """
     n_rho = positive.shape[1]
     k = min(k, positive.size)
-    c_pos, i_pos = jax.lax.top_k(positive.reshape(-1), k)
-    c_neg, i_neg = jax.lax.top_k(negative.reshape(-1), k)
+    f_pos, f_neg = _fractions(strength, positive.shape)
+    _, i_pos = jax.lax.top_k((positive + f_pos).reshape(-1), k)
+    _, i_neg = jax.lax.top_k((negative + f_neg).reshape(-1), k)
+    c_pos, c_neg = positive.reshape(-1)[i_pos], negative.reshape(-1)[i_neg]
+    f_pos, f_neg = f_pos.reshape(-1)[i_pos], f_neg.reshape(-1)[i_neg]
     th_pos, r_pos = theta[i_pos // n_rho], rho[i_pos % n_rho]
     th_neg, r_neg = theta[i_neg // n_rho], rho[i_neg % n_rho]
     # Pair matrix (positive i, negative j). A line at theta - pi is the same
@@ -196,18 +226,24 @@ def find_body(
         & (width <= params.max_width)
     )
     pair = jnp.minimum(c_pos[:, None], c_neg[None, :])
+    # Lexicographic: the pair's count, then the total count, then the strength (< 1).
     total = c_pos[:, None] + c_neg[None, :]
-    key = jnp.where(ok, pair * (2.0 * jnp.max(total) + 1.0) + total, -1.0)
+    tie = 0.5 * (f_pos[:, None] + f_neg[None, :])
+    top = 2.0 * jnp.max(total) + 2.0
+    key = jnp.where(ok, (pair * top + total) * 2.0 + tie, -1.0)
     best = jnp.argmax(key.reshape(-1))
     i, j = best // k, best % k
     theta_mean = 0.5 * (th_pos[i] + th_neg_aligned[i, j])
-    middle = 0.5 * image_height
-    pos = 0.5 * (_column_at_row(th_pos[i], r_pos[i], middle) + _column_at_row(th_neg_aligned[i, j], r_neg_aligned[i, j], middle))
+    pos = 0.5 * (
+        _column_at_row(th_pos[i], r_pos[i], origin, row)
+        + _column_at_row(th_neg_aligned[i, j], r_neg_aligned[i, j], origin, row)
+    )
     return Pipe(
         t=jnp.asarray(t, jnp.float32),
         theta=jnp.mod(theta_mean, jnp.pi),
         width=width[i, j],
         pos=pos,
+        row=jnp.asarray(row, jnp.float32),
         kind=jnp.asarray(BODY, jnp.int32),
         score=pair[i, j],
         valid=ok[i, j],
@@ -216,37 +252,42 @@ def find_body(
 
 def find_entry(
     counts: jax.Array,
-    a: jax.Array,
-    b: jax.Array,
-    r: jax.Array,
+    radii: jax.Array,
     t: jax.Array | float,
     min_count: jax.Array | float = 1.0,
+    *,
+    strength: jax.Array | None = None,
 ) -> Pipe:
     """The pipe entry: the circle-grid neuron that fired most in the slot (Section 2.3).
 
+    Ties (see :func:`find_body`) are broken by ``strength`` when given.
+
     Args:
-        counts: output spikes per neuron (both polarities), shape ``(n_a, n_b, n_r)``.
-        a, b: ``(n_a,)`` centre columns and ``(n_b,)`` centre rows, pixels, Eq. (3).
-        r: ``(n_r,)`` radii, pixels.
+        counts: output spikes per neuron (both polarities), shape
+            ``(n_r, height, width)``: radius, centre row ``b``, centre column
+            ``a`` (the layout of :class:`~spikejax.vision.hough.CircleGrid`).
+        radii: ``(n_r,)`` radius of each plane, pixels.
         t: time stamp of the slot, s.
         min_count: fewest spikes for a detection.
+        strength: optional tie-breaker of the grid's shape, >= 0.
 
     Returns:
-        A :class:`Pipe` of kind :data:`ENTRY`: ``pos = a``, ``width = 2 r``,
-        ``theta = 0``.
+        A :class:`Pipe` of kind :data:`ENTRY`: ``pos = a``, ``row = b``,
+        ``width = 2 r``, ``theta = 0``.
     """
-    n_b, n_r = counts.shape[1], counts.shape[2]
-    best = jnp.argmax(counts.reshape(-1))
-    ia, ib, ir = best // (n_b * n_r), (best // n_r) % n_b, best % n_r
-    score = counts.reshape(-1)[best]
-    del ib  # the row of the centre does not enter Alg. 3
+    height, width = counts.shape[1], counts.shape[2]
+    tie = _fractions(None if strength is None else (strength, strength), counts.shape)[0]
+    best = jnp.argmax((counts + tie).reshape(-1))
+    ir, ib, ia = best // (height * width), (best // width) % height, best % width
+    score = counts.reshape(-1)[best].astype(jnp.float32)
     return Pipe(
         t=jnp.asarray(t, jnp.float32),
         theta=jnp.zeros((), jnp.float32),
-        width=2.0 * r[ir].astype(jnp.float32),
-        pos=a[ia].astype(jnp.float32),
+        width=2.0 * jnp.asarray(radii, jnp.float32)[ir],
+        pos=ia.astype(jnp.float32),
+        row=ib.astype(jnp.float32),
         kind=jnp.asarray(ENTRY, jnp.int32),
-        score=score.astype(jnp.float32),
+        score=score,
         valid=score >= jnp.maximum(min_count, 1e-6),
     )
 

@@ -1,0 +1,448 @@
+"""Pipe detection on event recordings: ``spikejax detect pipe FILE``.
+
+The recording is cut into time slots (Alg. 2 of the snake pipe-tracking
+paper: "for each time slot"), each slot into ``sub_slots`` equal parts. The
+line and circle grids of :mod:`spikejax.vision.hough` run over the parts,
+synchronously (one update per part, the paper's GPU mode) or asynchronously
+(event by event, Alg. 1 exactly), their states carried from part to part and
+slot to slot. A grid reports at most one spike per neuron per part, so a
+neuron's firing frequency in a slot (the third condition of Section 2.3) is
+the number of parts in which it fired, counted per polarity
+(:func:`spikejax.vision.pipe.spike_counts`); ties, frequent when every
+neuron over threshold fires at once, are broken by the slot's vote
+accumulator. :func:`spikejax.vision.pipe.find_body`
+and :func:`~spikejax.vision.pipe.find_entry` turn the counts into pipes, and
+Alg. 3 (:func:`spikejax.vision.pipe.track`) into distances and offsets.
+
+Everything per slot is one jitted ``lax.scan``; slots are processed in chunks
+of fixed size (the last one padded with empty slots), so a recording of any
+length compiles once and the result does not depend on the chunk size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import math
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spikejax.errors import UserError
+from spikejax.vision import hough
+from spikejax.vision import io
+from spikejax.vision import pipe as pp
+from spikejax.vision.events import Events
+
+__all__ = ["Detector", "DetectorParams", "Detections", "detect", "detector_params", "main", "run"]
+
+MODES = ("sync", "async")
+
+
+@dataclasses.dataclass(frozen=True)
+class Detector:
+    """Static configuration: the grids (``None`` skips one), the mode and the slot split.
+
+    Attributes:
+        line: the line grid (pipe bodies), or ``None``.
+        circle: the circle grid (pipe entries), or ``None``.
+        mode: ``"sync"`` or ``"async"``.
+        sub_slots: parts per slot; a neuron fires at most once per part.
+        k: candidate spikes per polarity for :func:`~spikejax.vision.pipe.find_body`.
+    """
+
+    line: hough.LineGrid | None = hough.LineGrid()
+    circle: hough.CircleGrid | None = hough.CircleGrid()
+    mode: str = "sync"
+    sub_slots: int = 5
+    k: int = 16
+
+    def __post_init__(self):
+        if self.mode not in MODES:
+            raise UserError(f"mode must be one of {', '.join(MODES)}, not {self.mode!r}")
+        if self.line is None and self.circle is None:
+            raise UserError("the detector needs a line grid, a circle grid or both")
+        if not (isinstance(self.sub_slots, int) and self.sub_slots >= 1):
+            raise UserError(f"sub_slots must be a positive integer, not {self.sub_slots!r}")
+
+
+class DetectorParams(NamedTuple):
+    """Traced parameters: the two grids' neurons, Alg. 2's conditions, the entry's minimum count."""
+
+    line: hough.HoughParams
+    circle: hough.HoughParams
+    body: pp.BodyParams
+    entry_min_count: jax.Array
+
+
+def detector_params(
+    *,
+    v_th: float = 8.0,
+    decay: float = 50.0,
+    circle_v_th: float | None = None,
+    circle_decay: float | None = None,
+    body: pp.BodyParams | None = None,
+    entry_min_count: float = 1.0,
+) -> DetectorParams:
+    """:class:`DetectorParams` as float32 arrays (the circle grid defaults to the line grid's neurons)."""
+    body = pp.BodyParams() if body is None else body
+    return DetectorParams(
+        line=hough.hough_params(v_th, decay),
+        circle=hough.hough_params(v_th if circle_v_th is None else circle_v_th, decay if circle_decay is None else circle_decay),
+        body=pp.BodyParams(*(jnp.asarray(v, jnp.float32) for v in body)),
+        entry_min_count=jnp.asarray(entry_min_count, jnp.float32),
+    )
+
+
+class DetectorState(NamedTuple):
+    line: hough.HoughState | None
+    circle: hough.HoughState | None
+
+
+def _init(det: Detector, t0=0.0) -> DetectorState:
+    return DetectorState(
+        None if det.line is None else hough.init(det.line, t0),
+        None if det.circle is None else hough.init(det.circle, t0),
+    )
+
+
+def _grid_spikes(det, grid, params, state, events, times):
+    if det.mode == "sync":
+        return hough.sync_run(params, grid, events, times, state)
+    return hough.async_run(params, grid, events, state)
+
+
+def _empty_pipe(kind):
+    z = jnp.zeros((), jnp.float32)
+    return pp.Pipe(z, z, z, z, z, jnp.asarray(kind, jnp.int32), z, jnp.zeros((), bool))
+
+
+def _flat(events: Events) -> Events:
+    return jax.tree.map(lambda v: v.reshape(-1), events)
+
+
+def slot_step(det: Detector, params: DetectorParams, state: DetectorState, events: Events, times, t):
+    """One slot: the grids over its ``sub_slots`` parts, then Alg. 2 on the spike counts.
+
+    Args:
+        det: static configuration.
+        params: traced parameters.
+        state: the grids' states.
+        events: :class:`Events` with leaves ``(sub_slots, capacity)``.
+        times: ``(sub_slots,)`` end of each part, s (the synchronous update times).
+        t: the slot's time stamp for the detections, s.
+
+    Returns:
+        ``(state, (body, entry, line_counts, circle_counts))``; the counts are
+        the ``(positive, negative)`` spike counts per neuron, or ``None``.
+    """
+    body, entry, line_counts, circle_counts = _empty_pipe(pp.BODY), _empty_pipe(pp.ENTRY), None, None
+    line_state, circle_state = state
+    if det.line is not None:
+        line_state, spikes = _grid_spikes(det, det.line, params.line, line_state, events, times)
+        line_counts = pp.spike_counts(spikes, 2)
+        votes = hough.line_votes(det.line, _flat(events))
+        body = pp.find_body(
+            params.body, *line_counts, jnp.asarray(det.line.thetas(), jnp.float32),
+            jnp.asarray(det.line.rhos(), jnp.float32), t,
+            strength=(jnp.maximum(votes, 0.0), jnp.maximum(-votes, 0.0)),
+            origin=det.line.origin, row=0.5 * det.line.height, k=det.k,
+        )
+    if det.circle is not None:
+        circle_state, spikes = _grid_spikes(det, det.circle, params.circle, circle_state, events, times)
+        circle_counts = pp.spike_counts(spikes, 3)
+        votes = hough.circle_votes(det.circle, _flat(events), signed=False)
+        entry = pp.find_entry(
+            circle_counts[0] + circle_counts[1], jnp.asarray(det.circle.radii(), jnp.float32), t,
+            params.entry_min_count, strength=votes,
+        )
+    return DetectorState(line_state, circle_state), (body, entry, line_counts, circle_counts)
+
+
+def run(det: Detector, params: DetectorParams, events: Events, times, state: DetectorState | None = None, *, keep_counts: bool = False):
+    """:func:`slot_step` over slots, as a ``lax.scan`` (one stream; ``vmap`` adds streams).
+
+    Args:
+        det: static configuration.
+        params: traced parameters.
+        events: :class:`Events` with leaves ``(n_slots, sub_slots, capacity)``.
+        times: ``(n_slots, sub_slots)`` end of each part, s; a slot's detections
+            are stamped with the end of its last part.
+        state: the grids' states (default: at rest at time 0).
+        keep_counts: also return the spike counts of every slot (memory:
+            ``n_slots`` grids of each kind).
+
+    Returns:
+        ``(state, bodies, entries)`` with :class:`~spikejax.vision.pipe.Pipe`
+        fields of shape ``(n_slots,)``, plus ``(line_counts, circle_counts)``
+        when ``keep_counts``.
+    """
+    times = jnp.asarray(times, jnp.float32)
+    state = _init(det) if state is None else state
+
+    def body(state, slot):
+        ev, ts = slot
+        state, (b, e, lc, cc) = slot_step(det, params, state, ev, ts, ts[-1])
+        return state, (b, e, lc, cc) if keep_counts else (b, e)
+
+    state, out = jax.lax.scan(body, state, (events, times))
+    return (state, *out)
+
+
+class Detections(NamedTuple):
+    """What :func:`detect` found in a recording (host arrays, one row per slot).
+
+    Attributes:
+        bodies, entries: :class:`~spikejax.vision.pipe.Pipe` of numpy arrays ``(n_slots,)``.
+        body_estimates, entry_estimates: Alg. 3 for each kind, :class:`~spikejax.vision.pipe.Estimate`.
+        overflow: ``(n_slots,)`` events that did not fit the parts' capacity.
+        t0: absolute time (us) of ``t = 0``.
+    """
+
+    bodies: pp.Pipe
+    entries: pp.Pipe
+    body_estimates: pp.Estimate
+    entry_estimates: pp.Estimate
+    overflow: np.ndarray
+    t0: int
+
+    def table(self) -> list[dict]:
+        """The valid detections in time order: t, kind, theta (deg), width, pos, distance, offset, control."""
+        rows = []
+        for pipes, est, kind in ((self.bodies, self.body_estimates, "body"), (self.entries, self.entry_estimates, "entry")):
+            for i in np.flatnonzero(pipes.valid):
+                rows.append(
+                    dict(
+                        t=float(pipes.t[i]), kind=kind, theta_deg=math.degrees(float(pipes.theta[i])),
+                        width_px=float(pipes.width[i]), pos_px=float(pipes.pos[i]), row_px=float(pipes.row[i]),
+                        distance_m=float(est.distance[i]), offset_m=float(est.offset[i]),
+                        control=int(est.control[i]), score=float(pipes.score[i]),
+                    )
+                )
+        return sorted(rows, key=lambda r: (r["t"], r["kind"]))
+
+
+def _parts(a: np.ndarray, det: Detector, slot: float, capacity: int) -> tuple[io.Slots, int]:
+    part = slot / det.sub_slots
+    parts = io.to_slots(a, part, capacity)
+    n_parts = parts.events.x.shape[0]
+    n_slots = max(1, -(-n_parts // det.sub_slots))
+    if n_slots * det.sub_slots != n_parts:
+        parts = io.to_slots(a, part, capacity, n_slots=n_slots * det.sub_slots)
+    return parts, n_slots
+
+
+def detect(
+    events: np.ndarray,
+    sensor_size: tuple[int, int] = (128, 128),
+    *,
+    mode: str = "sync",
+    slot: float = 0.02,
+    sub_slots: int = 5,
+    capacity: int = 4096,
+    lines: bool = True,
+    circles: bool = True,
+    params: DetectorParams | None = None,
+    track: pp.TrackParams | None = None,
+    chunk: int = 64,
+    progress: bool = False,
+) -> Detections:
+    """Detect pipes in a recording: Alg. 2 slot by slot, then Alg. 3.
+
+    Args:
+        events: canonical structured array (:func:`spikejax.vision.io.read`).
+        sensor_size: ``(width, height)``; the grids are the paper's for this size.
+        mode: ``"sync"`` or ``"async"`` (see :mod:`spikejax.vision.hough`).
+        slot: slot length, s.
+        sub_slots: parts per slot.
+        capacity: events per part; the rest are counted in ``overflow``.
+        lines, circles: which grids to run.
+        params: neuron and detection parameters (default :func:`detector_params`
+            with ``v_th`` half the sensor height: an edge fires a neuron once
+            it has covered about half the image within a part).
+        track: Alg. 3 parameters (default: 60 degree field of view, unknown size, no speed).
+        chunk: slots per compiled call.
+        progress: show a progress bar.
+
+    Returns:
+        :class:`Detections`.
+    """
+    width, height = sensor_size
+    det = Detector(
+        line=hough.LineGrid(width, height) if lines else None,
+        circle=hough.CircleGrid(width, height, n_r=min(64, max(1, min(width, height) // 2))) if circles else None,
+        mode=mode,
+        sub_slots=sub_slots,
+    )
+    params = detector_params(v_th=0.5 * height) if params is None else params
+    track = pp.track_params(width=width) if track is None else track
+    parts, n_slots = _parts(events, det, slot, capacity)
+    part = slot / det.sub_slots
+    ends = ((np.arange(n_slots * det.sub_slots) + 1) * part).reshape(n_slots, det.sub_slots)
+    batch = jax.tree.map(lambda v: np.asarray(v).reshape(n_slots, det.sub_slots, -1), parts.events)
+    chunk = max(1, min(chunk, n_slots))
+    step = jax.jit(run, static_argnums=0)
+    state = _init(det)
+    bodies, entries = [], []
+    bar = _progress(n_slots, progress)
+    for start in range(0, n_slots, chunk):
+        stop = min(start + chunk, n_slots)
+        ev = jax.tree.map(lambda v: _pad(v[start:stop], chunk), batch)
+        ts = _pad(ends[start:stop], chunk, edge=True)
+        # Padded slots are empty and come last: the state after them is never used.
+        state, b, e = step(det, params, ev, ts, state)
+        bodies.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], b))
+        entries.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], e))
+        bar.update(stop - start)
+    bar.close()
+    cat = lambda parts_: jax.tree.map(lambda *v: np.concatenate(v), *parts_)
+    bodies, entries = cat(bodies), cat(entries)
+    est_body = jax.tree.map(np.asarray, pp.track(track, jax.tree.map(jnp.asarray, bodies)))
+    est_entry = jax.tree.map(np.asarray, pp.track(track, jax.tree.map(jnp.asarray, entries)))
+    overflow = parts.overflow.reshape(n_slots, det.sub_slots).sum(axis=1)
+    return Detections(bodies, entries, est_body, est_entry, overflow, parts.t0)
+
+
+def _pad(v: np.ndarray, n: int, edge: bool = False) -> np.ndarray:
+    if v.shape[0] == n:
+        return v
+    widths = [(0, n - v.shape[0])] + [(0, 0)] * (v.ndim - 1)
+    return np.pad(v, widths, mode="edge" if edge else "constant")
+
+
+def _progress(total: int, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="slot", desc="detect pipe", disable=not enabled)
+
+
+# --- command line ----------------------------------------------------------------
+
+
+def main(args: argparse.Namespace) -> int:
+    """``spikejax detect pipe FILE``: print the detections; write a CSV and an overlay image to ``--out``."""
+    for name in ("slot", "fov"):
+        if not getattr(args, name) > 0:
+            raise UserError(f"--{name} must be > 0, not {getattr(args, name)}")
+    if args.pipe_size < 0 or args.speed < 0:
+        raise UserError("--pipe-size and --speed must be >= 0")
+    if args.sub_slots < 1 or args.capacity < 1:
+        raise UserError("--sub-slots and --capacity must be >= 1")
+    events, size = io.read(args.file, args.sensor_size)
+    if len(events) == 0:
+        raise UserError(f"{args.file}: no events")
+    track = pp.track_params(fov=math.radians(args.fov), width=size[0], size=args.pipe_size, speed=args.speed)
+    found = detect(
+        events, size, mode=args.mode, slot=args.slot, sub_slots=args.sub_slots, capacity=args.capacity,
+        lines=args.shapes != "circles", circles=args.shapes != "lines",
+        params=detector_params(v_th=0.5 * size[1] if args.v_th is None else args.v_th, decay=args.decay),
+        track=track, progress=not args.no_progress,
+    )
+    rows = found.table()
+    duration = (events["t"][-1] - events["t"][0]) * 1e-6
+    print(f"{args.file}: {len(events)} events, {size[0]}x{size[1]} sensor, {duration:.3f} s, "
+          f"{len(found.overflow)} slots of {args.slot * 1e3:g} ms, mode {args.mode}")
+    if found.overflow.sum():
+        print(f"warning: {int(found.overflow.sum())} events did not fit (capacity {args.capacity} per "
+              f"part) in {int((found.overflow > 0).sum())} slots; raise --capacity")
+    print(format_table(rows))
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        write_csv(out / "detections.csv", rows)
+        overlay(out / "overlay.png", events, size, found, args.slot)
+        print(f"wrote {out / 'detections.csv'} and {out / 'overlay.png'}")
+    return 0
+
+
+COLUMNS = ("t", "kind", "theta_deg", "width_px", "pos_px", "row_px", "distance_m", "offset_m", "control", "score")
+
+
+def format_table(rows: list[dict]) -> str:
+    """The detections as an aligned text table (distance ``-`` where unknown)."""
+    if not rows:
+        return "no pipe detected"
+    head = f"{'t (s)':>9} {'kind':<5} {'theta':>6} {'width':>6} {'pos':>6} {'distance':>9} {'C':>2} {'spikes':>6}"
+    lines = [head]
+    for r in rows:
+        d = f"{r['distance_m']:.3f} m" if r["distance_m"] > 0 else "-"
+        lines.append(
+            f"{r['t']:9.3f} {r['kind']:<5} {r['theta_deg']:6.1f} {r['width_px']:6.1f} {r['pos_px']:6.1f} "
+            f"{d:>9} {r['control']:>2d} {r['score']:6.0f}"
+        )
+    return "\n".join(lines)
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    """All detections, one row each (columns :data:`COLUMNS`), written atomically."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    tmp.replace(path)
+
+
+def edges(pipe_theta: float, width: float, pos: float, row: float) -> list[tuple[float, float, float]]:
+    """The two edges of a body as ``(theta, rho, ox=pos, oy=row)`` lines: ``rho = +-w/2`` about its centre."""
+    return [(pipe_theta, -0.5 * width, pos, row), (pipe_theta, 0.5 * width, pos, row)]
+
+
+def draw_line(ax, theta, rho, origin, size, **kw):
+    """Draw ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)`` across an image of ``size``."""
+    width, height = size
+    s, c = math.sin(theta), math.cos(theta)
+    if abs(s) >= abs(c):
+        y = np.array([0.0, height - 1.0])
+        x = origin[0] + (rho - (y - origin[1]) * c) / s
+    else:
+        x = np.array([0.0, width - 1.0])
+        y = origin[1] + (rho - (x - origin[0]) * s) / c
+    ax.plot(x, y, **kw)
+
+
+def event_frame(events: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Sum of polarities per pixel, ``(height, width)``."""
+    frame = np.zeros((size[1], size[0]), np.float32)
+    np.add.at(frame, (events["y"], events["x"]), events["p"])
+    return frame
+
+
+def overlay(path: Path, events: np.ndarray, size, found: Detections, slot: float, panels: int = 4) -> None:
+    """Up to ``panels`` slots with detections: their events, the body's edges and the entry's ring."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    found_any = np.flatnonzero(found.bodies.valid | found.entries.valid)
+    if len(found_any) == 0:
+        found_any = np.array([int(np.argmax(np.bincount(((events["t"] - found.t0) * 1e-6 // slot).astype(int))))])
+    chosen = found_any[np.linspace(0, len(found_any) - 1, min(panels, len(found_any))).round().astype(int)]
+    fig, axes = plt.subplots(1, len(chosen), figsize=(3.2 * len(chosen), 3.4), squeeze=False)
+    seconds = (events["t"] - found.t0) * 1e-6
+    for ax, i in zip(axes[0], chosen):
+        in_slot = events[(seconds >= i * slot) & (seconds < (i + 1) * slot)]
+        frame = event_frame(in_slot, size)
+        lim = max(1.0, np.abs(frame).max())
+        ax.imshow(frame, cmap="bwr", vmin=-lim, vmax=lim, interpolation="nearest")
+        if found.bodies.valid[i]:
+            b = jax.tree.map(lambda v: v[i], found.bodies)
+            for theta, rho, ox, oy in edges(float(b.theta), float(b.width), float(b.pos), float(b.row)):
+                draw_line(ax, theta, rho, (ox, oy), size, color="lime", lw=1.2)
+        if found.entries.valid[i]:
+            e = jax.tree.map(lambda v: v[i], found.entries)
+            ax.add_patch(plt.Circle((float(e.pos), float(e.row)), 0.5 * float(e.width), fill=False, color="gold", lw=1.2))
+        ax.set_xlim(-0.5, size[0] - 0.5)
+        ax.set_ylim(size[1] - 0.5, -0.5)
+        ax.set_title(f"t = {(i + 1) * slot:.3f} s", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle("events (red ON, blue OFF); body edges green, entry gold", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
