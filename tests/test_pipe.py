@@ -13,17 +13,18 @@ THETA = jnp.deg2rad(jnp.arange(180.0))  # the paper's line grid: 1 degree
 RHO = jnp.arange(-90.0, 180.0)  # signed rho, 1 pixel
 
 
-def _counts(*lines):
-    """Positive and negative count grids with the given (polarity, theta_deg, rho, count)."""
-    pos = np.zeros((180, RHO.shape[0]), np.float32)
-    neg = np.zeros_like(pos)
-    for polarity, theta, rho, count in lines:
-        (pos if polarity > 0 else neg)[theta, int(rho) + 90] = count
-    return jnp.asarray(pos), jnp.asarray(neg)
+def _spikes(*lines, n_updates=10):
+    """Output spikes ``(n_updates, 180, n_rho)``: (polarity, theta_deg, rho, updates) fires in
+    the given updates (a list) or in the first ``updates`` ones (an int)."""
+    spikes = np.zeros((n_updates, 180, RHO.shape[0]), np.int8)
+    for polarity, theta, rho, updates in lines:
+        updates = range(updates) if isinstance(updates, int) else updates
+        spikes[list(updates), theta, int(rho) + 90] = polarity
+    return jnp.asarray(spikes)
 
 
 def test_body_is_the_most_frequent_parallel_opposite_pair():
-    pos, neg = _counts(
+    spikes = _spikes(
         (+1, 90, 40, 5),  # left edge x = 40
         (-1, 91, 60, 4),  # right edge, 1 degree off: parallel within 5 degrees
         (-1, 30, 50, 9),  # strongest negative, not parallel: rejected
@@ -31,9 +32,10 @@ def test_body_is_the_most_frequent_parallel_opposite_pair():
         (-1, 90, 42, 2),  # parallel to both positives but too close to x = 41, and rarer
         (+1, 10, 5, 1),  # pair only with nothing
     )
-    found = pp.find_body(pp.BodyParams(), pos, neg, THETA, RHO, t=0.25)
+    found = pp.find_body(pp.BodyParams(), spikes, THETA, RHO, t=0.25)
     assert bool(found.valid) and int(found.kind) == pp.BODY
-    # Positive x=41 (8 spikes) with negative rho=60 (4) is the best pair: min(8, 4) = 4 > min(5, 4).
+    # x = 41 (8 spikes) and rho = 60 (4) fire together in 4 updates, as do x = 40 and rho = 60,
+    # but the first pair has more spikes in all.
     assert float(found.score) == 4.0
     np.testing.assert_allclose(float(found.width), 19.0)
     # Columns at the middle row (y = 64): 41 and (60 - 64 cos 91 deg) / sin 91 deg.
@@ -45,8 +47,7 @@ def test_body_is_the_most_frequent_parallel_opposite_pair():
 
 def test_body_pairs_across_the_theta_wrap():
     # theta = 0: the row y = rho; theta = 179 deg is nearly the same direction with rho ~ -y.
-    pos, neg = _counts((+1, 0, 30, 3), (-1, 179, -50, 3))
-    found = pp.find_body(pp.BodyParams(), pos, neg, THETA, RHO, t=0.0)
+    found = pp.find_body(pp.BodyParams(), _spikes((+1, 0, 30, 3), (-1, 179, -50, 3)), THETA, RHO, t=0.0)
     assert bool(found.valid)
     np.testing.assert_allclose(float(found.width), 20.0, atol=1e-4)
     assert float(found.theta) < math.radians(1.0) or float(found.theta) > math.radians(179.0)
@@ -63,8 +64,26 @@ def test_body_pairs_across_the_theta_wrap():
     ],
 )
 def test_body_conditions_reject(lines, params):
-    pos, neg = _counts(*lines)
-    assert not bool(pp.find_body(params, pos, neg, THETA, RHO, t=0.0).valid)
+    assert not bool(pp.find_body(params, _spikes(*lines), THETA, RHO, t=0.0).valid)
+
+
+def test_body_edges_must_fire_together():
+    # A sweeping camera: the right edge is at x = 70 in updates 2-3, at x = 60 in update 0.
+    spikes = _spikes((+1, 90, 40, [0, 1]), (-1, 90, 70, [2, 3]), (-1, 90, 60, [0]))
+    found = pp.find_body(pp.BodyParams(), spikes, THETA, RHO, t=0.0)
+    assert bool(found.valid) and float(found.score) == 1.0
+    np.testing.assert_allclose(float(found.width), 20.0)
+
+
+def test_strength_breaks_ties_without_outranking_spikes():
+    spikes = _spikes((+1, 88, 40, 2), (-1, 88, 60, 2), (+1, 90, 40, 2), (-1, 90, 64, 2), n_updates=2)
+    strength = np.zeros((2, 180, RHO.shape[0]), np.float32)
+    strength[:, 90] = 100.0  # the 90-degree lines carry the votes
+    found = pp.find_body(pp.BodyParams(), spikes, THETA, RHO, 0.0, strength=tuple(jnp.asarray(strength)))
+    np.testing.assert_allclose(float(found.width), 24.0)
+    more = _spikes((+1, 88, 40, 2), (-1, 88, 60, 2), (+1, 90, 40, 1), (-1, 90, 64, 1), n_updates=2)
+    found = pp.find_body(pp.BodyParams(), more, THETA, RHO, 0.0, strength=tuple(jnp.asarray(strength)))
+    np.testing.assert_allclose(float(found.width), 20.0)
 
 
 def test_spike_counts_and_entry():
@@ -80,12 +99,10 @@ def test_spike_counts_and_entry():
 
 
 def test_find_body_vmaps_like_a_loop():
-    grids = [_counts((+1, 90, 20 + i, 3), (-1, 90, 40 + 2 * i, 3)) for i in range(4)]
-    pos = jnp.stack([g[0] for g in grids])
-    neg = jnp.stack([g[1] for g in grids])
-    batched = jax.vmap(pp.find_body, in_axes=(None, 0, 0, None, None, None))(pp.BodyParams(), pos, neg, THETA, RHO, 0.0)
+    spikes = jnp.stack([_spikes((+1, 90, 20 + i, 3), (-1, 90, 40 + 2 * i, 3), n_updates=3) for i in range(4)])
+    batched = jax.vmap(pp.find_body, in_axes=(None, 0, None, None, None))(pp.BodyParams(), spikes, THETA, RHO, 0.0)
     for i in range(4):
-        one = pp.find_body(pp.BodyParams(), pos[i], neg[i], THETA, RHO, 0.0)
+        one = pp.find_body(pp.BodyParams(), spikes[i], THETA, RHO, 0.0)
         np.testing.assert_allclose(batched.width[i], one.width)
         np.testing.assert_allclose(batched.pos[i], one.pos)
     np.testing.assert_allclose(batched.width, [20, 21, 22, 23])

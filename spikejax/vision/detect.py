@@ -7,10 +7,9 @@ synchronously (one update per part, the paper's GPU mode) or asynchronously
 (event by event, Alg. 1 exactly), their states carried from part to part and
 slot to slot. A grid reports at most one spike per neuron per part, so a
 neuron's firing frequency in a slot (the third condition of Section 2.3) is
-the number of parts in which it fired, counted per polarity
-(:func:`spikejax.vision.pipe.spike_counts`); ties, frequent when every
-neuron over threshold fires at once, are broken by the slot's vote
-accumulator. :func:`spikejax.vision.pipe.find_body`
+the number of parts in which it fired, and a pair's the number of parts in
+which both fired; ties, frequent when every neuron over threshold fires at
+once, are broken by the slot's vote accumulator. :func:`spikejax.vision.pipe.find_body`
 and :func:`~spikejax.vision.pipe.find_entry` turn the counts into pipes, and
 Alg. 3 (:func:`spikejax.vision.pipe.track`) into distances and offsets.
 
@@ -59,7 +58,7 @@ class Detector:
     circle: hough.CircleGrid | None = hough.CircleGrid()
     mode: str = "sync"
     sub_slots: int = 5
-    k: int = 16
+    k: int = 32
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -147,7 +146,7 @@ def slot_step(det: Detector, params: DetectorParams, state: DetectorState, event
         line_counts = pp.spike_counts(spikes, 2)
         votes = hough.line_votes(det.line, _flat(events))
         body = pp.find_body(
-            params.body, *line_counts, jnp.asarray(det.line.thetas(), jnp.float32),
+            params.body, spikes, jnp.asarray(det.line.thetas(), jnp.float32),
             jnp.asarray(det.line.rhos(), jnp.float32), t,
             strength=(jnp.maximum(votes, 0.0), jnp.maximum(-votes, 0.0)),
             origin=det.line.origin, row=0.5 * det.line.height, k=det.k,

@@ -7,7 +7,7 @@ implemented through spiking neural network on a snake robot", Sections 2.3-2.4:
   opposite polarity (one edge brightens while the other darkens as the camera
   sweeps across it). In each time slot, among the line grid's output spikes,
   the pair of neurons with opposite spike polarity, parallel within a
-  tolerance, that fired most often is the pipe ``P(t, theta, w, pos)``
+  tolerance, that fired together most often is the pipe ``P(t, theta, w, pos)``
   (:func:`find_body`). A lying pipe seen end-on is a ring: the circle grid's
   most active neuron is the pipe entry (:func:`find_entry`).
 * **Alg. 3** (relative position): the distance from a known pipe size, Eq. (8),
@@ -109,7 +109,7 @@ class BodyParams(NamedTuple):
         min_width: smallest distance between the edges, pixels: two spikes of
             one edge (its two polarities a pixel apart) are not a pipe.
         max_width: largest distance between the edges, pixels.
-        min_count: fewest output spikes of each edge in the slot.
+        min_count: fewest updates of the slot in which both edges fired.
     """
 
     angle_tol: jax.Array | float = math.radians(5.0)
@@ -156,8 +156,7 @@ def _column_at_row(theta, rho, origin, row):
 
 def find_body(
     params: BodyParams,
-    positive: jax.Array,
-    negative: jax.Array,
+    spikes: jax.Array,
     theta: jax.Array,
     rho: jax.Array,
     t: jax.Array | float,
@@ -165,29 +164,31 @@ def find_body(
     strength: tuple[jax.Array, jax.Array] | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
     row: float = 64.0,
-    k: int = 16,
+    k: int = 32,
 ) -> Pipe:
     """Alg. 2, line 11: the pipe body among a slot's line-grid output spikes.
 
-    The ``k`` neurons that fired most positive spikes and the ``k`` that fired
-    most negative ones are paired, every positive with every negative one. A
-    pair qualifies when (Section 2.3) the polarities are opposite, the two
-    lines are parallel within ``angle_tol`` (angles compared modulo ``pi``)
-    and ``min_width <= w <= max_width``; the qualifying pair that appeared most
-    often, i.e. whose less active edge fired most (ties: the larger total),
-    is the pipe.
+    The ``k`` neurons that fired most positive spikes in the slot and the
+    ``k`` that fired most negative ones are paired, every positive with every
+    negative one. A pair qualifies when (Section 2.3) the polarities are
+    opposite, the two lines are parallel within ``angle_tol`` (angles compared
+    modulo ``pi``) and ``min_width <= w <= max_width``. "The pair of parallel
+    lines appears at the maximum frequency": the qualifying pair that fired
+    together (in the same update) most often is the pipe; ties go to the
+    pair with more spikes in all, then to the larger ``strength``. Counting
+    joint firing rather than each line's own spikes keeps two edges seen at
+    different moments of a sweeping camera from pairing into a wrong width.
 
     When the grid reports at most one spike per neuron per update (the
     synchronous mode fires every neuron over threshold at once), many
-    neighbouring neurons tie; ``strength`` then breaks the ties, both in the
-    choice of candidates and of the pair, without ever outranking a
-    difference in spike counts. :mod:`spikejax.vision.detect` passes the
-    slot's vote accumulator split by sign.
+    neighbouring neurons tie; ``strength`` breaks the ties, in the choice of
+    candidates and of the pair, without ever outranking a spike.
+    :mod:`spikejax.vision.detect` passes the slot's votes split by sign.
 
     Args:
         params: the judgment conditions.
-        positive, negative: spike counts per neuron, shape ``(n_theta, n_rho)``
-            (e.g. from :func:`spike_counts`).
+        spikes: output spikes in ``{-1, 0, +1}``, shape ``(n_updates, n_theta,
+            n_rho)``: one grid per update of the slot.
         theta: ``(n_theta,)`` angle of each grid row, rad, Eq. (2).
         rho: ``(n_rho,)`` distance of each grid column, pixels, Eq. (2).
         t: time stamp of the slot, s.
@@ -198,16 +199,23 @@ def find_body(
         k: candidates per polarity (static).
 
     Returns:
-        A :class:`Pipe` of kind :data:`BODY`; ``valid`` is False when no pair
+        A :class:`Pipe` of kind :data:`BODY`, ``score`` the number of updates
+        in which the pair fired together; ``valid`` is False when no pair
         qualifies.
     """
-    n_rho = positive.shape[1]
-    k = min(k, positive.size)
+    n_updates, n_theta, n_rho = spikes.shape
+    flat = spikes.reshape(n_updates, -1)
+    fired_pos, fired_neg = flat > 0, flat < 0
+    positive = jnp.sum(fired_pos, axis=0, dtype=jnp.float32)
+    negative = jnp.sum(fired_neg, axis=0, dtype=jnp.float32)
+    k = min(k, n_theta * n_rho)
     f_pos, f_neg = _fractions(strength, positive.shape)
-    _, i_pos = jax.lax.top_k((positive + f_pos).reshape(-1), k)
-    _, i_neg = jax.lax.top_k((negative + f_neg).reshape(-1), k)
-    c_pos, c_neg = positive.reshape(-1)[i_pos], negative.reshape(-1)[i_neg]
+    _, i_pos = jax.lax.top_k(positive + f_pos.reshape(-1), k)
+    _, i_neg = jax.lax.top_k(negative + f_neg.reshape(-1), k)
+    c_pos, c_neg = positive[i_pos], negative[i_neg]
     f_pos, f_neg = f_pos.reshape(-1)[i_pos], f_neg.reshape(-1)[i_neg]
+    # Updates in which positive candidate i and negative candidate j both fired.
+    together = fired_pos[:, i_pos].astype(jnp.float32).T @ fired_neg[:, i_neg].astype(jnp.float32)
     th_pos, r_pos = theta[i_pos // n_rho], rho[i_pos % n_rho]
     th_neg, r_neg = theta[i_neg // n_rho], rho[i_neg % n_rho]
     # Pair matrix (positive i, negative j). A line at theta - pi is the same
@@ -219,18 +227,16 @@ def find_body(
     angle = jnp.abs(th_neg_aligned - th_pos[:, None])
     width = jnp.abs(r_neg_aligned - r_pos[:, None])
     ok = (
-        (c_pos[:, None] >= jnp.maximum(params.min_count, 1e-6))
-        & (c_neg[None, :] >= jnp.maximum(params.min_count, 1e-6))
+        (together >= jnp.maximum(params.min_count, 1e-6))
         & (angle <= params.angle_tol)
         & (width >= params.min_width)
         & (width <= params.max_width)
     )
-    pair = jnp.minimum(c_pos[:, None], c_neg[None, :])
-    # Lexicographic: the pair's count, then the total count, then the strength (< 1).
+    # Lexicographic: firing together, then the total count, then the strength (< 1).
     total = c_pos[:, None] + c_neg[None, :]
     tie = 0.5 * (f_pos[:, None] + f_neg[None, :])
-    top = 2.0 * jnp.max(total) + 2.0
-    key = jnp.where(ok, (pair * top + total) * 2.0 + tie, -1.0)
+    top = 2.0 * n_updates + 2.0
+    key = jnp.where(ok, (together * top + total) * 2.0 + tie, -1.0)
     best = jnp.argmax(key.reshape(-1))
     i, j = best // k, best % k
     theta_mean = 0.5 * (th_pos[i] + th_neg_aligned[i, j])
@@ -245,7 +251,7 @@ def find_body(
         pos=pos,
         row=jnp.asarray(row, jnp.float32),
         kind=jnp.asarray(BODY, jnp.int32),
-        score=pair[i, j],
+        score=together[i, j],
         valid=ok[i, j],
     )
 
