@@ -413,16 +413,15 @@ def event_frame(events: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 def overlay(path: Path, events: np.ndarray, size, found: Detections, slot: float, panels: int = 4) -> None:
     """Up to ``panels`` slots with detections: their events, the body's edges and the entry's ring."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
 
     found_any = np.flatnonzero(found.bodies.valid | found.entries.valid)
     if len(found_any) == 0:
         found_any = np.array([int(np.argmax(np.bincount(((events["t"] - found.t0) * 1e-6 // slot).astype(int))))])
     chosen = found_any[np.linspace(0, len(found_any) - 1, min(panels, len(found_any))).round().astype(int)]
-    fig, axes = plt.subplots(1, len(chosen), figsize=(3.2 * len(chosen), 3.4), squeeze=False)
+    fig = Figure(figsize=(3.2 * len(chosen), 3.4))
+    axes = fig.subplots(1, len(chosen), squeeze=False)
     seconds = (events["t"] - found.t0) * 1e-6
     for ax, i in zip(axes[0], chosen):
         in_slot = events[(seconds >= i * slot) & (seconds < (i + 1) * slot)]
@@ -435,7 +434,7 @@ def overlay(path: Path, events: np.ndarray, size, found: Detections, slot: float
                 draw_line(ax, theta, rho, (ox, oy), size, color="lime", lw=1.2)
         if found.entries.valid[i]:
             e = jax.tree.map(lambda v: v[i], found.entries)
-            ax.add_patch(plt.Circle((float(e.pos), float(e.row)), 0.5 * float(e.width), fill=False, color="gold", lw=1.2))
+            ax.add_patch(Circle((float(e.pos), float(e.row)), 0.5 * float(e.width), fill=False, color="gold", lw=1.2))
         ax.set_xlim(-0.5, size[0] - 0.5)
         ax.set_ylim(size[1] - 0.5, -0.5)
         ax.set_title(f"t = {(i + 1) * slot:.3f} s", fontsize=9)
@@ -444,4 +443,3 @@ def overlay(path: Path, events: np.ndarray, size, found: Detections, slot: float
     fig.suptitle("events (red ON, blue OFF); body edges green, entry gold", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
