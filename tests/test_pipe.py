@@ -11,6 +11,7 @@ from spikejax.vision import pipe as pp
 
 THETA = jnp.deg2rad(jnp.arange(180.0))  # the paper's line grid: 1 degree
 RHO = jnp.arange(-90.0, 180.0)  # signed rho, 1 pixel
+find_body = jax.jit(pp.find_body, static_argnames=("origin", "k"))
 
 
 def _spikes(*lines, n_updates=10):
@@ -32,7 +33,7 @@ def test_body_is_the_most_frequent_parallel_opposite_pair():
         (-1, 90, 42, 2),  # parallel to both positives but too close to x = 41, and rarer
         (+1, 10, 5, 1),  # pair only with nothing
     )
-    found = pp.find_body(pp.BodyParams(), spikes, THETA, RHO, t=0.25)
+    found = find_body(pp.BodyParams(), spikes, THETA, RHO, t=0.25)
     assert bool(found.valid) and int(found.kind) == pp.BODY
     # x = 41 (8 spikes) and rho = 60 (4) fire together in 4 updates, as do x = 40 and rho = 60,
     # but the first pair has more spikes in all.
@@ -47,7 +48,7 @@ def test_body_is_the_most_frequent_parallel_opposite_pair():
 
 def test_body_pairs_across_the_theta_wrap():
     # theta = 0: the row y = rho; theta = 179 deg is nearly the same direction with rho ~ -y.
-    found = pp.find_body(pp.BodyParams(), _spikes((+1, 0, 30, 3), (-1, 179, -50, 3)), THETA, RHO, t=0.0)
+    found = find_body(pp.BodyParams(), _spikes((+1, 0, 30, 3), (-1, 179, -50, 3)), THETA, RHO, t=0.0)
     assert bool(found.valid)
     np.testing.assert_allclose(float(found.width), 20.0, atol=1e-4)
     assert float(found.theta) < math.radians(1.0) or float(found.theta) > math.radians(179.0)
@@ -64,13 +65,13 @@ def test_body_pairs_across_the_theta_wrap():
     ],
 )
 def test_body_conditions_reject(lines, params):
-    assert not bool(pp.find_body(params, _spikes(*lines), THETA, RHO, t=0.0).valid)
+    assert not bool(find_body(params, _spikes(*lines), THETA, RHO, t=0.0).valid)
 
 
 def test_body_edges_must_fire_together():
     # A sweeping camera: the right edge is at x = 70 in updates 2-3, at x = 60 in update 0.
     spikes = _spikes((+1, 90, 40, [0, 1]), (-1, 90, 70, [2, 3]), (-1, 90, 60, [0]))
-    found = pp.find_body(pp.BodyParams(), spikes, THETA, RHO, t=0.0)
+    found = find_body(pp.BodyParams(), spikes, THETA, RHO, t=0.0)
     assert bool(found.valid) and float(found.score) == 1.0
     np.testing.assert_allclose(float(found.width), 20.0)
 
@@ -79,10 +80,10 @@ def test_strength_breaks_ties_without_outranking_spikes():
     spikes = _spikes((+1, 88, 40, 2), (-1, 88, 60, 2), (+1, 90, 40, 2), (-1, 90, 64, 2), n_updates=2)
     strength = np.zeros((2, 180, RHO.shape[0]), np.float32)
     strength[:, 90] = 100.0  # the 90-degree lines carry the votes
-    found = pp.find_body(pp.BodyParams(), spikes, THETA, RHO, 0.0, strength=tuple(jnp.asarray(strength)))
+    found = find_body(pp.BodyParams(), spikes, THETA, RHO, 0.0, strength=tuple(jnp.asarray(strength)))
     np.testing.assert_allclose(float(found.width), 24.0)
     more = _spikes((+1, 88, 40, 2), (-1, 88, 60, 2), (+1, 90, 40, 1), (-1, 90, 64, 1), n_updates=2)
-    found = pp.find_body(pp.BodyParams(), more, THETA, RHO, 0.0, strength=tuple(jnp.asarray(strength)))
+    found = find_body(pp.BodyParams(), more, THETA, RHO, 0.0, strength=tuple(jnp.asarray(strength)))
     np.testing.assert_allclose(float(found.width), 20.0)
 
 
@@ -102,7 +103,7 @@ def test_find_body_vmaps_like_a_loop():
     spikes = jnp.stack([_spikes((+1, 90, 20 + i, 3), (-1, 90, 40 + 2 * i, 3), n_updates=3) for i in range(4)])
     batched = jax.vmap(pp.find_body, in_axes=(None, 0, None, None, None))(pp.BodyParams(), spikes, THETA, RHO, 0.0)
     for i in range(4):
-        one = pp.find_body(pp.BodyParams(), spikes[i], THETA, RHO, 0.0)
+        one = find_body(pp.BodyParams(), spikes[i], THETA, RHO, 0.0)
         np.testing.assert_allclose(batched.width[i], one.width)
         np.testing.assert_allclose(batched.pos[i], one.pos)
     np.testing.assert_allclose(batched.width, [20, 21, 22, 23])
