@@ -497,59 +497,124 @@ def _first_of_runs(cross: jax.Array, adjacent: jax.Array) -> jax.Array:
     return cross & ((index - start) % 2 == 0)
 
 
+def _inhibit(state, out, fired, cells, signs, neighbours, chunk: int = 16):
+    """Reset the neighbourhoods of the fired cells and record their spikes.
+
+    ``neighbours(i)`` gives the flat indices (``(m,)``, the dummy cell where
+    masked) of the neighbourhood of the ``i``-th touched cell. The fired cells
+    are visited ``chunk`` at a time in a while loop.
+    """
+    n = fired.shape[0]
+    count = jnp.sum(fired)
+    dummy = state.shape[0] - 1
+
+    def body(carry):
+        i, state, out = carry
+        order = jnp.nonzero(fired, size=n, fill_value=n - 1)[0]
+        slots = i * chunk + jnp.arange(chunk)
+        live = slots < count
+        which = order[jnp.minimum(slots, n - 1)]
+        idx = jax.vmap(neighbours)(which)
+        idx = jnp.where(live[:, None], idx, dummy).reshape(-1)
+        state = state.at[idx, 0].set(0.0, mode="promise_in_bounds")
+        spiked = jnp.where(live, cells[which], dummy)
+        out = out.at[spiked].set(signs[which], mode="promise_in_bounds")
+        return i + 1, state, out
+
+    _, state, out = jax.lax.while_loop(lambda c: c[0] * chunk < count, body, (0, state, out))
+    return state, out
+
+
+def _if_any(flag, fn, state, out):
+    """``fn(state, out)`` if ``flag``, else the inputs unchanged.
+
+    A while loop of at most one trip rather than ``lax.cond``: under ``vmap`` a
+    cond runs both branches for every stream, whereas the loop body runs only
+    when some stream of the batch needs it. Firing is rare, so the common event
+    pays for no inhibition at all.
+    """
+
+    def body(carry):
+        _, state, out = carry
+        return (False,) + tuple(fn(state, out))
+
+    _, state, out = jax.lax.while_loop(lambda c: c[0], body, (flag, state, out))
+    return state, out
+
+
+def _gather_update(params, state, cells, t, p):
+    """Lazy decay (Alg. 1, line 2) and input (line 3) of the touched cells, written back."""
+    old = state[cells]
+    new = _decay(old[:, 0], params.decay * (t - old[:, 1])) + p.astype(jnp.float32)
+    # Written as the change from the gathered values: XLA updates the state in
+    # place for a scatter-add after a gather, where a scatter-set makes it copy.
+    update = jnp.stack([new, jnp.broadcast_to(t, new.shape)], axis=1) - old
+    return state.at[cells].add(update, mode="promise_in_bounds"), new
+
+
 def _line_event(params, grid: LineGrid, table, carry, event):
     """Alg. 1 for the ``n_theta`` cells one event votes for, in the order of Alg. 2."""
-    v, t_last, out = carry
+    state, out = carry  # state: (size + 1, 2) rows (v, t_last); the last row is a dummy
     x, y, t, p, valid = event
-    n_rho, size = grid.n_rho, grid.size
+    n_rho, size, n_theta = grid.n_rho, grid.size, grid.n_theta
     on = valid & (x >= 0) & (x < grid.width) & (y >= 0) & (y < grid.height)
     cells = table[jnp.where(on, y * grid.width + x, 0)]
     ok = on & (cells < size)
     cells = jnp.where(ok, cells, size)
-    pol = p.astype(jnp.float32)
-    new = _decay(v[cells], params.decay * (t - t_last[cells])) + pol
+    state, new = _gather_update(params, state, cells, t, p)
     cross = ok & (jnp.abs(new) >= params.v_th)
-    rho = cells - jnp.arange(grid.n_theta) * n_rho
-    adjacent = ok[:-1] & ok[1:] & (jnp.abs(rho[1:] - rho[:-1]) <= 1)
-    fired = _first_of_runs(cross, adjacent)
-    # A cell right after an adjacent fired cell was reset before its own update.
-    reset_before = jnp.concatenate([jnp.zeros((1,), bool), fired[:-1] & adjacent])
-    reset_after = jnp.concatenate([fired[1:] & adjacent, jnp.zeros((1,), bool)])
-    value = jnp.where(reset_before, pol, new)
-    value = jnp.where(fired | reset_after, 0.0, value)
-    # Inhibition: the 3 x 3 neighbourhood of each fired cell, then the event's own cells.
-    k = jnp.arange(grid.n_theta)
-    dk, dj = jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij")
-    nk = k[:, None] + dk.reshape(-1)[None, :]
-    nj = rho[:, None] + dj.reshape(-1)[None, :]
-    inside = fired[:, None] & (nk >= 0) & (nk < grid.n_theta) & (nj >= 0) & (nj < n_rho)
-    v = v.at[jnp.where(inside, nk * n_rho + nj, size).reshape(-1)].set(0.0)
-    v = v.at[cells].set(value)
-    t_last = t_last.at[cells].set(t)
-    out = out.at[jnp.where(fired, cells, size)].set(jnp.sign(new).astype(jnp.int8))
-    return v, t_last, out
+
+    def fire(state, out):
+        pol = p.astype(jnp.float32)
+        k = jnp.arange(n_theta)
+        rho = cells - k * n_rho
+        adjacent = ok[:-1] & ok[1:] & (jnp.abs(rho[1:] - rho[:-1]) <= 1)
+        fired = _first_of_runs(cross, adjacent)
+        # A cell right after an adjacent fired cell was reset before its own
+        # update; one right before an adjacent fired cell is reset after it.
+        reset_before = jnp.concatenate([jnp.zeros((1,), bool), fired[:-1] & adjacent])
+        reset_after = jnp.concatenate([fired[1:] & adjacent, jnp.zeros((1,), bool)])
+        value = jnp.where(reset_before, pol, new)
+        value = jnp.where(fired | reset_after, 0.0, value)
+        state = state.at[cells, 0].add(value - new, mode="promise_in_bounds")
+        dk, dj = (a.reshape(-1) for a in jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij"))
+
+        def neighbours(i):
+            # The 3 x 3 neighbourhood of the i-th cell, less the event's own
+            # cells (their values above already include the resets, in order).
+            nk, nj = i + dk, rho[i] + dj
+            inside = (nk >= 0) & (nk < n_theta) & (nj >= 0) & (nj < n_rho)
+            own = rho[jnp.clip(nk, 0, n_theta - 1)] == nj
+            return jnp.where(inside & ~own, nk * n_rho + nj, size)
+
+        return _inhibit(state, out, fired, cells, jnp.sign(new).astype(jnp.int8), neighbours)
+
+    return _if_any(jnp.any(cross), fire, state, out)
 
 
 def _circle_event(params, grid: CircleGrid, offsets, carry, event):
     """Alg. 1 for the ring cells one event votes for, all updated at once."""
-    v, t_last, out = carry
+    state, out = carry
     x, y, t, p, valid = event
     size = grid.size
     flat, inside = _ring_cells(grid, offsets, x, y)
     ok = valid & inside
     cells = jnp.where(ok, flat, size)
-    new = _decay(v[cells], params.decay * (t - t_last[cells])) + p.astype(jnp.float32)
+    state, new = _gather_update(params, state, cells, t, p)
     fired = ok & (jnp.abs(new) >= params.v_th)
-    v = v.at[cells].set(jnp.where(fired, 0.0, new))
-    t_last = t_last.at[cells].set(t)
-    out = out.at[jnp.where(fired, cells, size)].set(jnp.sign(new).astype(jnp.int8))
+    d = jnp.stack([a.reshape(-1) for a in jnp.meshgrid(*(jnp.arange(-1, 2),) * 3, indexing="ij")], axis=1)
 
-    def inhibit(v):
-        fired_grid = jnp.zeros((size + 1,), bool).at[cells].max(fired)[:size].reshape(grid.shape)
-        return jnp.where(_neighbourhood(fired_grid).reshape(-1), 0.0, v[:size]).reshape(-1)
+    def neighbours(i):
+        kr = offsets[i, 0] + d[:, 0]
+        b = y + offsets[i, 1] + d[:, 1]
+        a = x + offsets[i, 2] + d[:, 2]
+        inside = (kr >= 0) & (kr < grid.n_r) & (b >= 0) & (b < grid.height) & (a >= 0) & (a < grid.width)
+        return jnp.where(inside, (kr * grid.height + b) * grid.width + a, size)
 
-    v = jnp.concatenate([jax.lax.cond(jnp.any(fired), inhibit, lambda v: v[:size], v), v[size:]])
-    return v, t_last, out
+    def fire(state, out):
+        return _inhibit(state, out, fired, cells, jnp.sign(new).astype(jnp.int8), neighbours)
+
+    return _if_any(jnp.any(fired), fire, state, out)
 
 
 def async_step(
@@ -571,8 +636,8 @@ def async_step(
         last spike of each neuron during the slot (0 if it did not fire).
     """
     size = grid.size
-    pad = lambda a, fill: jnp.concatenate([a.reshape(-1), jnp.full((1,), fill, a.dtype)])
-    carry = (pad(state.v, 0.0), pad(state.t, 0.0), jnp.zeros((size + 1,), jnp.int8))
+    packed = jnp.stack([state.v.reshape(-1), state.t.reshape(-1)], axis=1)
+    carry = (jnp.concatenate([packed, jnp.zeros((1, 2), jnp.float32)]), jnp.zeros((size + 1,), jnp.int8))
     if isinstance(grid, LineGrid):
         wiring = jnp.asarray(line_table(grid))
         step = functools.partial(_line_event, params, grid, wiring)
@@ -581,8 +646,8 @@ def async_step(
         step = functools.partial(_circle_event, params, grid, wiring)
     else:
         raise UserError(f"not a Hough grid: {type(grid).__name__}")
-    (v, t_last, out), _ = jax.lax.scan(lambda c, e: (step(c, e), None), carry, tuple(events))
-    state = HoughState(v[:size].reshape(grid.shape), t_last[:size].reshape(grid.shape))
+    (packed, out), _ = jax.lax.scan(lambda c, e: (step(c, e), None), carry, tuple(events))
+    state = HoughState(packed[:size, 0].reshape(grid.shape), packed[:size, 1].reshape(grid.shape))
     return state, out[:size].reshape(grid.shape)
 
 
