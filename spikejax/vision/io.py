@@ -558,7 +558,13 @@ def to_slots(
         raise UserError(f"capacity must be > 0, not {capacity}")
     t0 = _t0(events, t0)
     seconds = (events["t"] - t0).astype(np.float64) * 1e-6
-    index = np.floor(seconds / slot).astype(np.int64)
+    slot_us = slot * 1e6
+    if abs(slot_us - round(slot_us)) < 1e-6:
+        # Whole microseconds: integer division, so that an event stamped exactly
+        # on a boundary opens the next slot whatever the float rounding.
+        index = (events["t"] - t0) // int(round(slot_us))
+    else:
+        index = np.floor((events["t"] - t0) / slot_us).astype(np.int64)
     if n_slots is None:
         n_slots = int(index[-1]) + 1 if len(events) else 0
     keep = (index >= 0) & (index < n_slots)
