@@ -180,3 +180,15 @@ def test_slots_partition_events_and_count_overflow():
     np.testing.assert_array_equal(s.events.x[0], [0, 1, 2])
     np.testing.assert_array_equal(s.events.x[3, :2], [5, 6])
     np.testing.assert_allclose(s.start, [0, 1e-3, 2e-3, 3e-3])
+
+
+def test_slots_boundaries_are_exact_in_microseconds():
+    # Frame-difference events share their frame's stamp, which falls on slot boundaries:
+    # 0.01 s is not exact in binary, but 10,000 us is.
+    a = np.zeros(30, io.EVENT_DTYPE)
+    a["t"] = 1_700_000_000_000_000 + np.repeat(np.arange(10) * 10_000, 3)
+    a["p"] = 1
+    s = io.to_slots(a, slot=0.01, capacity=4)
+    np.testing.assert_array_equal(s.events.valid.sum(1), np.full(10, 3))
+    s = io.to_slots(a, slot=0.03, capacity=9)
+    np.testing.assert_array_equal(s.events.valid.sum(1), [9, 9, 9, 3])
