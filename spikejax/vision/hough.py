@@ -483,20 +483,6 @@ def sync_run(
     return jax.lax.scan(body, state, (events, times))
 
 
-def _first_of_runs(cross: jax.Array, adjacent: jax.Array) -> jax.Array:
-    """Which crossings fire when the cells of one event are updated in order.
-
-    Cell ``j`` fires if it crosses the threshold and was not just reset by cell
-    ``j - 1`` firing next to it (``adjacent[j - 1]``). Along a run of crossing,
-    adjacent cells the fires therefore alternate, starting with the first.
-    """
-    n = cross.shape[0]
-    index = jnp.arange(n)
-    link = jnp.concatenate([jnp.zeros((1,), bool), cross[:-1] & adjacent & cross[1:]])
-    start = jax.lax.cummax(jnp.where(link, 0, index))
-    return cross & ((index - start) % 2 == 0)
-
-
 def _inhibit(state, out, fired, cells, signs, neighbours, chunk: int = 16):
     """Reset the neighbourhoods of the fired cells and record their spikes.
 
@@ -553,7 +539,7 @@ def _gather_update(params, state, cells, t, p):
 
 
 def _line_event(params, grid: LineGrid, table, carry, event):
-    """Alg. 1 for the ``n_theta`` cells one event votes for, in the order of Alg. 2."""
+    """Alg. 1 for the ``n_theta`` cells one event votes for (one per angle, Alg. 2)."""
     state, out = carry  # state: (size + 1, 2) rows (v, t_last); the last row is a dummy
     x, y, t, p, valid = event
     n_rho, size, n_theta = grid.n_rho, grid.size, grid.n_theta
@@ -564,30 +550,16 @@ def _line_event(params, grid: LineGrid, table, carry, event):
     state, new = _gather_update(params, state, cells, t, p)
     cross = ok & (jnp.abs(new) >= params.v_th)
 
+    rho = cells - jnp.arange(n_theta) * n_rho
+    dk, dj = (a.reshape(-1) for a in jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij"))
+
+    def neighbours(i):
+        nk, nj = i + dk, rho[i] + dj
+        inside = (nk >= 0) & (nk < n_theta) & (nj >= 0) & (nj < n_rho)
+        return jnp.where(inside, nk * n_rho + nj, size)
+
     def fire(state, out):
-        pol = p.astype(jnp.float32)
-        k = jnp.arange(n_theta)
-        rho = cells - k * n_rho
-        adjacent = ok[:-1] & ok[1:] & (jnp.abs(rho[1:] - rho[:-1]) <= 1)
-        fired = _first_of_runs(cross, adjacent)
-        # A cell right after an adjacent fired cell was reset before its own
-        # update; one right before an adjacent fired cell is reset after it.
-        reset_before = jnp.concatenate([jnp.zeros((1,), bool), fired[:-1] & adjacent])
-        reset_after = jnp.concatenate([fired[1:] & adjacent, jnp.zeros((1,), bool)])
-        value = jnp.where(reset_before, pol, new)
-        value = jnp.where(fired | reset_after, 0.0, value)
-        state = state.at[cells, 0].add(value - new, mode="promise_in_bounds")
-        dk, dj = (a.reshape(-1) for a in jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij"))
-
-        def neighbours(i):
-            # The 3 x 3 neighbourhood of the i-th cell, less the event's own
-            # cells (their values above already include the resets, in order).
-            nk, nj = i + dk, rho[i] + dj
-            inside = (nk >= 0) & (nk < n_theta) & (nj >= 0) & (nj < n_rho)
-            own = rho[jnp.clip(nk, 0, n_theta - 1)] == nj
-            return jnp.where(inside & ~own, nk * n_rho + nj, size)
-
-        return _inhibit(state, out, fired, cells, jnp.sign(new).astype(jnp.int8), neighbours)
+        return _inhibit(state, out, cross, cells, jnp.sign(new).astype(jnp.int8), neighbours)
 
     return _if_any(jnp.any(cross), fire, state, out)
 
@@ -623,13 +595,16 @@ def async_step(
     """Feed one slot's events one at a time, in the order given (time order), through Alg. 1.
 
     Each event updates only the cells it votes for, at its own time stamp: the
-    lazy decay makes the potentials exactly those of Alg. 1. For a
-    :class:`LineGrid` the ``n_theta`` cells of an event are visited in the order
-    of Alg. 2 (increasing theta): a cell that fires resets its 3 x 3
-    neighbourhood at once, so the next angle's cell, if adjacent, starts from 0
-    (computed without a loop, by :func:`_first_of_runs`). For a
-    :class:`CircleGrid` all ring cells of an event are updated together and
-    then the 3 x 3 x 3 neighbourhoods of those that fired are reset.
+    lazy decay makes the potentials exactly those of Alg. 1 (a linear decay
+    toward 0 composes: decaying by ``a`` then ``b`` is decaying by ``a + b``).
+    An event's spikes reach all its cells (one per angle, or its rings) at the
+    same instant ``t_i``: they are all updated, those with ``|v| >= v_th`` fire
+    together, and then the 3 x 3 (x 3) neighbourhoods of the fired cells are
+    reset, the fired cells included. (A loop over the angles that resets
+    between angles, as a literal reading of Alg. 2 would, differs only when two
+    neighbouring cells of the same event cross the threshold on the same event:
+    then it lets only the first of them fire.) So with one event per slot,
+    :func:`sync_step` at the event's time gives the same spikes and potentials.
 
     Returns:
         ``(state, spikes)``: spikes of shape ``grid.shape``, int8, the sign of the

@@ -1,0 +1,225 @@
+"""Spiking Hough grids: accumulators against brute force and scikit-image, Alg. 1 by hand."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from skimage.draw import circle_perimeter
+from skimage.transform import hough_circle, hough_circle_peaks, hough_line
+
+from spikejax.errors import UserError
+from spikejax.vision import dvs, hough, scenes
+from spikejax.vision.events import Events
+
+
+def _events(x, y, t=None, p=None, valid=None):
+    n = len(x)
+    return Events(
+        jnp.asarray(x, jnp.int32),
+        jnp.asarray(y, jnp.int32),
+        jnp.asarray(np.zeros(n) if t is None else t, jnp.float32),
+        jnp.asarray(np.ones(n) if p is None else p, jnp.int32),
+        jnp.asarray(np.ones(n, bool) if valid is None else valid),
+    )
+
+
+def _random_events(rng, n, width, height):
+    return _events(
+        rng.integers(0, width, n),
+        rng.integers(0, height, n),
+        np.sort(rng.random(n)),
+        rng.choice([-1, 1], n),
+        rng.random(n) < 0.9,
+    )
+
+
+def _c_round(v):
+    """C's round (ties away from zero), without the error of floor(v + 0.5)."""
+    a = abs(v)
+    n = math.floor(a)
+    n += 1 if a - n >= 0.5 else 0
+    return n if v >= 0 else -n
+
+
+def _line_cell(grid, x, y, k):
+    phi = math.pi / 2 - k * (math.pi / grid.n_theta)  # the trigonometry of line_table
+    rho = (x - grid.origin[0]) * math.cos(phi) + (y - grid.origin[1]) * math.sin(phi)
+    j = _c_round(rho / grid.rho_step) + grid.rho_offset
+    return j if 0 <= j < grid.n_rho else None
+
+
+def test_line_votes_equal_brute_force():
+    rng = np.random.default_rng(0)
+    for grid in (
+        hough.LineGrid(width=12, height=10, n_theta=30, n_rho=25),
+        hough.LineGrid(width=9, height=14, n_theta=17, n_rho=9, rho_step=2.0, origin=(1.0, 3.5)),
+    ):
+        ev = _random_events(rng, 60, grid.width, grid.height)
+        expected = np.zeros(grid.shape)
+        for x, y, p, ok in zip(*(np.asarray(a) for a in (ev.x, ev.y, ev.p, ev.valid))):
+            for k in range(grid.n_theta):
+                j = _line_cell(grid, x, y, k)
+                if ok and j is not None:
+                    expected[k, j] += p
+        np.testing.assert_array_equal(np.asarray(hough.line_votes(grid, ev)), expected)
+
+
+def test_line_votes_equal_skimage_hough_line():
+    # Eq. (2) is rho = x sin(theta) + y cos(theta); scikit-image's is
+    # rho = x cos(phi) + y sin(phi) from the top-left pixel, so phi = pi/2 - theta,
+    # origin (0, 0) and distances -D .. D with D = ceil(hypot(height, width)).
+    rng = np.random.default_rng(1)
+    image = rng.random((40, 52)) < 0.08
+    image[5:35, 20] = True
+    d = int(np.ceil(np.hypot(*image.shape)))
+    grid = hough.LineGrid(width=52, height=40, n_rho=2 * d + 1, origin=(0, 0), rho_offset=d)
+    ys, xs = np.nonzero(image)
+    ours = np.asarray(hough.line_votes(grid, _events(xs, ys), signed=False))
+    accumulator, angles, distances = hough_line(image, grid.skimage_thetas())
+    np.testing.assert_array_equal(ours, accumulator.T)
+    np.testing.assert_allclose(grid.rhos(), distances)
+
+
+def test_line_cell_conversions():
+    grid = hough.LineGrid()
+    assert grid.cell(np.pi / 2, 10.0) == (90, 100)
+    assert grid.cell(np.pi + 0.5 * np.pi / 180, 3.0) == (0, 87)  # (theta + pi, -rho)
+    theta, rho = grid.line(90, 100)
+    assert theta == pytest.approx(np.pi / 2) and rho == 10.0
+
+
+def test_standing_pipe_edges_are_the_extreme_cells():
+    # One pixel of motion per frame: the events are the two edges, the right
+    # (leading) one ON, the left one OFF.
+    scene = scenes.standing_pipe(n_frames=3, speed=1.0, tilt=0.3, start=60.0)
+    events, overflow = dvs.difference_events(scene.frames, scene.times, threshold=0.3, capacity=2048)
+    assert int(overflow.sum()) == 0
+    grid = hough.LineGrid()
+    acc = np.asarray(hough.line_votes(grid, jax.tree.map(lambda a: a[1], events)))
+    truth = scene.truth
+    right = grid.cell(truth.theta[2], truth.rho_right[2] - 0.5)  # the band between frames 1 and 2
+    left = grid.cell(truth.theta[2], truth.rho_left[2] - 0.5)
+    top = np.unravel_index(np.argmax(acc), acc.shape)
+    bottom = np.unravel_index(np.argmin(acc), acc.shape)
+    assert truth.polarity_right[2] == 1 and truth.polarity_left[2] == -1
+    assert abs(top[0] - right[0]) <= 1 and abs(top[1] - right[1]) <= 1
+    assert abs(bottom[0] - left[0]) <= 1 and abs(bottom[1] - left[1]) <= 1
+
+
+def test_circle_votes_fft_and_scatter_equal_brute_force():
+    rng = np.random.default_rng(2)
+    grid = hough.CircleGrid(width=16, height=12, n_r=5, r_min=2.0)
+    ev = _random_events(rng, 25, grid.width, grid.height)
+    expected = np.zeros(grid.shape)
+    for x, y, p, ok in zip(*(np.asarray(a) for a in (ev.x, ev.y, ev.p, ev.valid))):
+        for k in range(grid.n_r):
+            for b in range(grid.height):
+                for a in range(grid.width):
+                    if ok and _c_round(math.hypot(x - a, y - b) - grid.r_min) == k:
+                        expected[k, b, a] += p
+    for method in ("fft", "scatter"):
+        np.testing.assert_array_equal(np.asarray(hough.circle_votes(grid, ev, method=method)), expected)
+
+
+@pytest.mark.parametrize("centre, radius", [((40, 30), 17), ((25, 38), 9)])
+def test_circle_detection_matches_skimage(centre, radius):
+    rng = np.random.default_rng(3)
+    image = rng.random((64, 64)) < 0.01
+    rr, cc = circle_perimeter(centre[1], centre[0], radius, shape=image.shape)
+    image[rr, cc] = True
+    radii = np.arange(4, 24)
+    _, cx, cy, rad = hough_circle_peaks(hough_circle(image, radii), radii, total_num_peaks=1)
+    grid = hough.CircleGrid(width=64, height=64, n_r=20, r_min=4.0)
+    ys, xs = np.nonzero(image)
+    acc = np.asarray(hough.circle_votes(grid, _events(xs, ys), signed=False))
+    k, b, a = np.unravel_index(np.argmax(acc), acc.shape)
+    assert (a, b) == (cx[0], cy[0]) == centre
+    assert grid.radii()[k] == rad[0] == radius
+
+
+def test_alg1_by_hand():
+    # One angle (theta = 0): cell j is row y; neighbours are rows y +- 1.
+    grid = hough.LineGrid(width=1, height=5, n_theta=1, n_rho=5, origin=(0, 0), rho_offset=0)
+    params = hough.hough_params(v_th=2.5, decay=2.0)
+    rows = [
+        # (t, y, p)
+        [(0.0, 2, 1), (0.25, 2, 1), (0.5, 3, -1), (0.5, 2, 1)],
+        [(0.5, 2, 1), (0.75, 4, -1), (0.75, 4, -1), (0.75, 4, -1), (1.0, 0, -1), (2.0, 0, 1)],
+    ]
+    cap = 6
+    ev = Events(*(jnp.asarray(np.zeros((2, cap)), d) for d in (jnp.int32, jnp.int32, jnp.float32, jnp.int32, bool)))
+    ev = Events(
+        x=ev.x,
+        y=jnp.asarray([[e[1] for e in r] + [0] * (cap - len(r)) for r in rows], jnp.int32),
+        t=jnp.asarray([[e[0] for e in r] + [0.0] * (cap - len(r)) for r in rows], jnp.float32),
+        p=jnp.asarray([[e[2] for e in r] + [0] * (cap - len(r)) for r in rows], jnp.int32),
+        valid=jnp.asarray([[True] * len(r) + [False] * (cap - len(r)) for r in rows]),
+    )
+    # Row 2: 1; decays 0.5 by t = 0.25 -> 1.5; decays 0.5 by t = 0.5 -> 2.0 (no
+    # spike: without the decay it would be 3). Slot 2: 3.0 >= 2.5, spike +1,
+    # rows 1-3 reset (row 3 held -1). Row 4: -3 at t = 0.75, spike -1, rows 3-4
+    # reset. Row 0: -1 at t = 1, decays to 0 by t = 2, then +1.
+    state, spikes = hough.async_run(params, grid, ev)
+    np.testing.assert_array_equal(np.asarray(spikes)[:, 0, :], [[0, 0, 0, 0, 0], [0, 0, 1, 0, -1]])
+    np.testing.assert_allclose(np.asarray(state.v)[0], [1.0, 0, 0, 0, 0])
+    assert float(state.t[0, 0]) == 2.0
+
+
+def test_sync_sums_a_slot_before_firing():
+    grid = hough.LineGrid(width=1, height=3, n_theta=1, n_rho=3, origin=(0, 0), rho_offset=0)
+    params = hough.hough_params(v_th=2.5, decay=0.0)
+    ev = _events([0, 0, 0, 0], [1, 1, 1, 1], [0.1, 0.2, 0.3, 0.4], [1, 1, 1, -1])
+    batch = jax.tree.map(lambda a: a[None], ev)
+    _, sync = hough.sync_run(params, grid, batch, jnp.asarray([0.4]))
+    _, asyn = hough.async_run(params, grid, batch)
+    assert np.asarray(sync)[0, 0].tolist() == [0, 0, 0]  # 1 + 1 + 1 - 1 = 2 < 2.5
+    assert np.asarray(asyn)[0, 0].tolist() == [0, 1, 0]  # the third event reaches 3
+
+
+def _one_per_slot(ev):
+    return jax.tree.map(lambda a: a[:, None], ev)
+
+
+@pytest.mark.parametrize(
+    "grid",
+    [hough.LineGrid(width=10, height=8, n_theta=24, n_rho=16), hough.CircleGrid(width=10, height=8, n_r=4, r_min=2.0)],
+)
+def test_sync_and_async_agree_when_events_are_sparse_in_time(grid):
+    # Events concentrated on few pixels, so that many cells fire.
+    rng = np.random.default_rng(4)
+    n = 120
+    pix = rng.integers(0, 6, n)
+    ev = _events(pix % 3 + 3, pix // 3 + 2, np.cumsum(rng.random(n) * 0.05), rng.choice([-1, 1, 1, 1], n))
+    params = hough.hough_params(v_th=3.5, decay=4.0)
+    slots = _one_per_slot(ev)
+    s_sync, sp_sync = jax.jit(lambda e, t: hough.sync_run(params, grid, e, t))(slots, ev.t)
+    s_async, sp_async = jax.jit(lambda e: hough.async_run(params, grid, e, hough.init(grid, ev.t[0])))(slots)
+    assert np.abs(np.asarray(sp_sync)).sum() > 5
+    np.testing.assert_array_equal(np.asarray(sp_sync), np.asarray(sp_async))
+    # Untouched neurons have decayed in sync mode only on paper: compare at the end.
+    end = float(ev.t[-1])
+    decayed = lambda s: hough._decay(s.v, params.decay * (end - s.t))
+    np.testing.assert_allclose(np.asarray(decayed(s_sync)), np.asarray(decayed(s_async)), atol=1e-5)
+
+
+def test_modes_vmap_over_streams_like_single_streams():
+    grid = hough.LineGrid(width=10, height=8, n_theta=12, n_rho=16)
+    params = hough.hough_params(v_th=2.5, decay=1.0)
+    rng = np.random.default_rng(5)
+    streams = [_random_events(rng, 40, grid.width, grid.height) for _ in range(3)]
+    batch = jax.tree.map(lambda *a: jnp.stack(a).reshape(3, 4, 10), *streams)
+    together = jax.vmap(lambda e: hough.async_run(params, grid, e)[1])(batch)
+    for i in range(3):
+        alone = hough.async_run(params, grid, jax.tree.map(lambda a: a[i], batch))[1]
+        np.testing.assert_array_equal(np.asarray(together[i]), np.asarray(alone))
+
+
+def test_bad_grids_are_refused():
+    with pytest.raises(UserError, match="n_theta"):
+        hough.LineGrid(n_theta=0)
+    with pytest.raises(UserError, match="r_min"):
+        hough.CircleGrid(r_min=0.0)
+    with pytest.raises(UserError, match="method"):
+        hough.circle_votes(hough.CircleGrid(width=8, height=8, n_r=2), _events([1], [1]), method="dense")
