@@ -93,6 +93,7 @@ def frame_difference(
     return compact(x, y, jnp.asarray(t, jnp.float32), p, mask, capacity)
 
 
+@functools.partial(jax.jit, static_argnames=("capacity", "log"))
 def difference_events(
     frames: jax.Array, times: jax.Array, *, threshold: float, capacity: int, log: bool = False, eps: float = 1e-3
 ) -> tuple[Events, jax.Array]:
@@ -252,6 +253,7 @@ def step(
     return new_state, events, overflow
 
 
+@functools.partial(jax.jit, static_argnames=("capacity", "max_per_pixel"))
 def emulate(
     params: DVSParams,
     key: jax.Array,

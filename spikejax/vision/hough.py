@@ -320,6 +320,7 @@ def _pixel(grid, events: Events) -> tuple[jax.Array, jax.Array]:
     return pixel, on & events.valid
 
 
+@functools.partial(jax.jit, static_argnames=("grid", "signed"))
 def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Array:
     """The line accumulator of a set of events: ``grid.shape`` float32.
 
@@ -372,6 +373,7 @@ def _ring_kernels(grid: CircleGrid) -> tuple[np.ndarray, int, int]:
     return kernels, ny, nx
 
 
+@functools.partial(jax.jit, static_argnames=("grid", "signed", "method"))
 def circle_votes(grid: CircleGrid, events: Events, *, signed: bool = True, method: str = "fft") -> jax.Array:
     """The circle accumulator of a set of events: ``grid.shape`` float32.
 
@@ -457,6 +459,7 @@ def sync_step(
     return HoughState(v, jnp.full_like(state.t, t)), spikes
 
 
+@functools.partial(jax.jit, static_argnames=("grid",))
 def sync_run(
     params: HoughParams, grid: Grid, events: Events, times, state: HoughState | None = None
 ) -> tuple[HoughState, jax.Array]:
@@ -626,6 +629,7 @@ def async_step(
     return state, out[:size].reshape(grid.shape)
 
 
+@functools.partial(jax.jit, static_argnames=("grid",))
 def async_run(
     params: HoughParams, grid: Grid, events: Events, state: HoughState | None = None
 ) -> tuple[HoughState, jax.Array]:
