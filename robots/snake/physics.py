@@ -1,0 +1,458 @@
+"""Physics of the wheel-less snake, one MJCF and two backends: MJX and MuJoCo's C engine.
+
+`make_physics` returns a `SnakePhysics` whose ``init()`` and ``step(state,
+ctrl)`` are pure functions of one snake, jittable, and batched by
+``jax.vmap``; the caller's code is the same for both backends:
+
+- ``"mjx"``: ``mjx.step`` in a ``lax.scan`` over the control step's physics
+  steps, everything in one XLA program (the engine for accelerators).
+- ``"mujoco"``: the same model stepped by MuJoCo's C engine
+  (``mujoco.rollout`` on a persistent pool of ``nthread`` threads), called from
+  inside the jitted program through ``jax.pure_callback`` with
+  ``vmap_method="broadcast_all"``, so a vmapped batch reaches C as one call
+  and is spread over the threads. What crosses the callback is MuJoCo's full
+  physics state (``mjSTATE_FULLPHYSICS``: time, qpos, qvel, act for this
+  model, checked at load), so the step stays a pure function of
+  `PhysState` and the control. This is the backend to use on a CPU, where MJX
+  is tens of times slower than C for a contact-rich 17-body chain.
+
+Either way the observations (`PhysState.head_pos`, ``head_mat``, ``com_pos``)
+are computed in JAX from ``qpos`` by `forward_kinematics` (DESIGN rule 5:
+sensors are JAX functions of the physics state, whichever backend produced it).
+The state is float32 (JAX's default), so the C backend rounds its float64
+state to float32 once per control step; positions carry about 1e-7 m of
+rounding, far below the contact solver's tolerance.
+
+One control step is ``substeps`` physics steps of ``dt`` with the control held
+(the paper's 20 ms control step by default: 10 steps of 2 ms).
+
+Model settings (`load_mj_model`): ``"default"`` is ``snake.xml`` as written
+(MuJoCo's default solver: Newton, 100 iterations, 50 line-search iterations,
+contacts from contype/conaffinity); ``"tuned"`` (the default here) replaces the
+collision filter by explicit floor-module contact pairs and caps the solver at
+`TUNED_ITERATIONS` / `TUNED_LS_ITERATIONS`, which ``tests/test_snake_physics.py``
+shows keeps the straight forward speed and the turning rate within 5 % of the
+default settings.
+
+XLA trap (``KNOWN-TRAPS.md``): with jax 0.10.2, XLA's fusion pass on a CPU
+took minutes or forever on ``mjx.step`` of a long kinematic chain. The cause:
+MJX walks the body tree one depth level at a time (``scan.body_tree``, a
+Python loop), and fusion inlines each level's result into every use in the
+next, so the fused expressions, compile time and run time grow exponentially
+with depth. The MJX backend traces ``mjx.step`` with an
+``optimization_barrier`` after each level (`mjx_level_barriers`, scoped to the
+tracing of this backend's step: other MJX programs are untouched), which keeps
+every level materialised: the snake's step compiles in about 20 s and runs
+ten times faster than with fusion disabled. The model's free joint also sits
+on the middle module, so its tree is two chains of 8 rather than one of 16.
+`forward_kinematics` puts the same barrier between bodies, for the same reason.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import pathlib
+import threading
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import rollout as mj_rollout
+
+from spikejax.errors import UserError
+
+__all__ = [
+    "BACKENDS",
+    "HEAD_BODY",
+    "HEAD_SITE",
+    "MODEL_PATH",
+    "TUNED_ITERATIONS",
+    "TUNED_LS_ITERATIONS",
+    "PhysState",
+    "SnakePhysics",
+    "forward_kinematics",
+    "joint_qpos_index",
+    "load_mj_model",
+    "make_physics",
+    "mjx_level_barriers",
+]
+
+MODEL_PATH = pathlib.Path(__file__).with_name("snake.xml")
+BACKENDS = ("mujoco", "mjx")
+HEAD_BODY = "module0"
+HEAD_SITE = "head_camera"
+N_MODULES = 17
+TUNED_ITERATIONS = 4
+TUNED_LS_ITERATIONS = 8
+
+
+class PhysState(NamedTuple):
+    """The state of one snake after a control step (float32).
+
+    Attributes:
+        qpos: generalised positions ``(23,)``: the free joint of the middle
+            module (position, quaternion), then the hinges in ``snake.xml``'s
+            order (`joint_qpos_index` maps joint numbers 1..16 to them).
+        qvel: generalised velocities ``(22,)``.
+        act: actuator activations ``(0,)`` (position servos have none; kept
+            so the state is MuJoCo's full physics state).
+        time: simulated time, s, ``()``.
+        head_pos: world position of the head camera, m, ``(3,)``.
+        head_mat: the head camera's rotation matrix ``(3, 3)``; its columns
+            are the camera's axes in the world: ``[:, 0]`` the optical axis
+            (forward), ``[:, 1]`` left, ``[:, 2]`` up.
+        com_pos: the snake's centre of mass, m, ``(3,)``.
+    """
+
+    qpos: jax.Array
+    qvel: jax.Array
+    act: jax.Array
+    time: jax.Array
+    head_pos: jax.Array
+    head_mat: jax.Array
+    com_pos: jax.Array
+
+
+@functools.cache
+def load_mj_model(settings: str = "tuned", dt: float = 0.002) -> mujoco.MjModel:
+    """The compiled snake for MuJoCo's C engine (cached), with ``settings`` and time step ``dt``.
+
+    Args:
+        settings: ``"default"``: ``snake.xml`` with MuJoCo's default solver
+            settings; ``"tuned"``: explicit contact pairs between the floor and
+            each module (no geom-pair filtering at run time, no
+            self-collision), `TUNED_ITERATIONS` solver iterations and
+            `TUNED_LS_ITERATIONS` line-search iterations.
+        dt: physics time step, s.
+
+    Returns:
+        The model (treat it as read-only: it is shared).
+    """
+    if settings not in ("default", "tuned"):
+        raise UserError(f"unknown snake model settings {settings!r}; expected 'default' or 'tuned'")
+    if not dt > 0:
+        raise UserError(f"physics time step must be positive, got dt={dt}")
+    spec = mujoco.MjSpec.from_file(str(MODEL_PATH))
+    spec.option.timestep = dt
+    if settings == "tuned":
+        for geom in spec.geoms:
+            geom.contype = 0
+            geom.conaffinity = 0
+        for k in range(N_MODULES):
+            spec.add_pair(geomname1="floor", geomname2=f"module{k}", condim=3,
+                          friction=[0.5, 0.5, 0.005, 0.0001, 0.0001])
+        spec.option.iterations = TUNED_ITERATIONS
+        spec.option.ls_iterations = TUNED_LS_ITERATIONS
+    model = spec.compile()
+    size = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    if size != 1 + model.nq + model.nv + model.na:
+        raise AssertionError(f"full physics state of {size} numbers is more than time, qpos, qvel, act")
+    return model
+
+
+def joint_qpos_index(model: mujoco.MjModel) -> np.ndarray:
+    """``qpos`` index of joints 1..16 (``(16,)`` ints), in the actuators' order."""
+    return np.array([model.jnt_qposadr[model.joint(f"joint{i}").id] for i in range(1, 17)])
+
+
+# ----------------------------------------------------------------- kinematics
+
+
+def _quat_mul(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return jnp.stack([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])
+
+
+def _quat_to_mat(q):
+    q = q / jnp.linalg.norm(q)
+    w, x, y, z = q
+    return jnp.stack([
+        jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)]),
+        jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)]),
+        jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]),
+    ])
+
+
+def _axis_angle_quat(axis, angle):
+    half = 0.5 * angle
+    return jnp.concatenate([jnp.cos(half)[None], jnp.sin(half) * axis])
+
+
+class _Tree(NamedTuple):
+    """What `forward_kinematics` reads from the model (NumPy constants, closed over)."""
+
+    parent: tuple
+    joint: tuple  # per body: None, ("free", qposadr) or ("hinge", qposadr, pos, axis)
+    pos: np.ndarray
+    quat: np.ndarray
+    mass: np.ndarray
+    ipos: np.ndarray
+    head: int
+    site_pos: np.ndarray
+    site_quat: np.ndarray
+
+
+@functools.cache
+def _tree(model_key) -> _Tree:
+    model = load_mj_model(*model_key)
+    joints = []
+    for b in range(model.nbody):
+        if model.body_jntnum[b] == 0:
+            joints.append(None)
+            continue
+        j = model.body_jntadr[b]
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            joints.append(("free", int(model.jnt_qposadr[j])))
+        else:
+            joints.append(("hinge", int(model.jnt_qposadr[j]), model.jnt_pos[j].copy(), model.jnt_axis[j].copy()))
+    site = model.site(HEAD_SITE)
+    return _Tree(tuple(int(p) for p in model.body_parentid), tuple(joints), model.body_pos.copy(),
+                 model.body_quat.copy(), model.body_mass.copy(), model.body_ipos.copy(), int(site.bodyid[0]),
+                 site.pos.copy(), site.quat.copy())
+
+
+def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float = 0.002):
+    """World poses of the snake's bodies, the head camera and the centre of mass from ``qpos``, in JAX.
+
+    The same computation as MuJoCo's ``mj_kinematics`` for this tree (a free
+    joint and hinges whose axes pass through their ``pos``), written out so
+    that both backends' observations are JAX functions of the state and so
+    the MJX program needs no extra kinematics pass.
+
+    Args:
+        qpos: ``(23,)``.
+        settings, dt: which `load_mj_model` model (the kinematics are the same for all).
+
+    Returns:
+        ``(xpos (18, 3), xmat (18, 3, 3), head_pos (3,), head_mat (3, 3), com_pos (3,))``;
+        body 0 is the world.
+    """
+    tree = _tree((settings, dt))
+    dtype = qpos.dtype
+    xpos = [jnp.zeros(3, dtype)]
+    xquat = [jnp.array([1.0, 0.0, 0.0, 0.0], dtype)]
+    for b in range(1, len(tree.parent)):
+        p = tree.parent[b]
+        pos = xpos[p] + _quat_to_mat(xquat[p]) @ jnp.asarray(tree.pos[b], dtype)
+        quat = _quat_mul(xquat[p], jnp.asarray(tree.quat[b], dtype))
+        joint = tree.joint[b]
+        if joint is not None and joint[0] == "free":
+            adr = joint[1]
+            pos, quat = qpos[adr:adr + 3], qpos[adr + 3:adr + 7] / jnp.linalg.norm(qpos[adr + 3:adr + 7])
+        elif joint is not None:
+            _, adr, jpos, axis = joint
+            anchor = pos + _quat_to_mat(quat) @ jnp.asarray(jpos, dtype)
+            quat = _quat_mul(quat, _axis_angle_quat(jnp.asarray(axis, dtype), qpos[adr]))
+            pos = anchor - _quat_to_mat(quat) @ jnp.asarray(jpos, dtype)
+        # Without the barrier XLA's fusion inlines every parent's pose into each child's,
+        # so the fused program grows exponentially along the chain (seconds per call).
+        pos, quat = jax.lax.optimization_barrier((pos, quat))
+        xpos.append(pos)
+        xquat.append(quat)
+    xpos = jnp.stack(xpos)
+    xmat = jax.vmap(_quat_to_mat)(jnp.stack(xquat))
+    h = tree.head
+    head_pos = xpos[h] + xmat[h] @ jnp.asarray(tree.site_pos, dtype)
+    head_mat = xmat[h] @ _quat_to_mat(jnp.asarray(tree.site_quat, dtype))
+    mass = jnp.asarray(tree.mass, dtype)
+    xipos = xpos + jnp.einsum("bij,bj->bi", xmat, jnp.asarray(tree.ipos, dtype))
+    com_pos = jnp.sum(mass[:, None] * xipos, axis=0) / jnp.sum(mass)
+    return xpos, xmat, head_pos, head_mat, com_pos
+
+
+# ----------------------------------------------------------------- backends
+
+
+class SnakePhysics(NamedTuple):
+    """One snake's physics: ``init() -> PhysState``, ``step(state, ctrl) -> PhysState``.
+
+    Attributes:
+        backend: ``"mujoco"`` or ``"mjx"``.
+        dt: physics time step, s.
+        substeps: physics steps per control step.
+        settings: the model settings (`load_mj_model`).
+        mj_model: the MuJoCo model both backends step.
+        init: the resting snake: straight, on the floor along ``-x`` from the
+            head at the origin, looking along ``+x``.
+        step: one control step: ``substeps`` physics steps with the servo
+            targets ``ctrl`` ``(16,)`` (rad, joint 1 first) held. Pure;
+            jit and vmap it.
+    """
+
+    backend: str
+    dt: float
+    substeps: int
+    settings: str
+    mj_model: mujoco.MjModel
+    init: Callable[[], PhysState]
+    step: Callable[[PhysState, jax.Array], PhysState]
+
+
+def _observe(qpos, qvel, act, time, settings, dt) -> PhysState:
+    _, _, head_pos, head_mat, com_pos = forward_kinematics(qpos, settings, dt)
+    return PhysState(qpos, qvel, act, time, head_pos, head_mat, com_pos)
+
+
+def _initial_state(model: mujoco.MjModel, settings: str, dt: float) -> Callable[[], PhysState]:
+    data = mujoco.MjData(model)
+    qpos = jnp.asarray(data.qpos, jnp.float32)
+    qvel = jnp.zeros(model.nv, jnp.float32)
+    act = jnp.zeros(model.na, jnp.float32)
+
+    def init() -> PhysState:
+        return _observe(qpos, qvel, act, jnp.zeros((), jnp.float32), settings, dt)
+
+    return init
+
+
+_BARRIER_LOCK = threading.RLock()
+
+
+@contextlib.contextmanager
+def mjx_level_barriers():
+    """While active, MJX functions traced put an ``optimization_barrier`` after each body-tree level.
+
+    MJX's per-level helper (``mujoco.mjx._src.scan._nvmap``, called once per
+    depth level and joint group by ``scan.body_tree`` and ``scan.flat``) is
+    wrapped so that its result passes through ``jax.lax.optimization_barrier``.
+    Values are unchanged; XLA just may not fuse one level's computation into
+    the next. Only what is traced inside the ``with`` block is affected (the
+    helper is restored on exit; a lock keeps two tracing threads from
+    interleaving).
+    """
+    from mujoco.mjx._src import scan
+
+    with _BARRIER_LOCK:
+        original = scan._nvmap
+
+        def nvmap(f, *args):
+            y = original(f, *args)
+            return None if y is None else jax.lax.optimization_barrier(y)
+
+        scan._nvmap = nvmap
+        try:
+            yield
+        finally:
+            scan._nvmap = original
+
+
+class _CRunner:
+    """Steps batches of snakes with ``mujoco.rollout`` on a persistent thread pool (host side)."""
+
+    def __init__(self, model: mujoco.MjModel, substeps: int, nthread: int):
+        self.model = model
+        self.substeps = substeps
+        self.nthread = nthread
+        self.datas = [mujoco.MjData(model) for _ in range(nthread)]
+        # A batch smaller than the pool runs on the calling thread.
+        self.serial = mj_rollout.Rollout(nthread=0)
+        self.pool = mj_rollout.Rollout(nthread=nthread) if nthread > 1 else self.serial
+        self.lock = threading.Lock()
+        self.nq, self.nv, self.na = model.nq, model.nv, model.na
+
+    def __call__(self, qpos, qvel, act, time, ctrl):
+        batch_shape = time.shape
+        n = int(np.prod(batch_shape, dtype=np.int64))
+        state = np.concatenate([
+            np.asarray(time, np.float64).reshape(n, 1),
+            np.asarray(qpos, np.float64).reshape(n, self.nq),
+            np.asarray(qvel, np.float64).reshape(n, self.nv),
+            np.asarray(act, np.float64).reshape(n, self.na),
+        ], axis=1)
+        control = np.asarray(ctrl, np.float64).reshape(n, 1, self.model.nu)
+        threaded = self.nthread > 1 and n >= self.nthread
+        pool, datas = (self.pool, self.datas) if threaded else (self.serial, self.datas[:1])
+        with self.lock:
+            out, _ = pool.rollout(
+                [self.model] * n, datas, state, control,
+                nstep=self.substeps, initial_warmstart=np.zeros((n, self.nv)),
+                chunk_size=max(1, n // len(datas)),
+            )
+        final = out[:, -1, :].astype(np.float32)
+        i = np.cumsum([1, self.nq, self.nv])
+        return (final[:, i[0]:i[1]].reshape(*batch_shape, self.nq),
+                final[:, i[1]:i[2]].reshape(*batch_shape, self.nv),
+                final[:, i[2]:].reshape(*batch_shape, self.na),
+                final[:, 0].reshape(batch_shape))
+
+
+def _mujoco_backend(model, substeps, nthread, settings, dt):
+    runner = _CRunner(model, substeps, nthread)
+    shapes = (jax.ShapeDtypeStruct((model.nq,), jnp.float32), jax.ShapeDtypeStruct((model.nv,), jnp.float32),
+              jax.ShapeDtypeStruct((model.na,), jnp.float32), jax.ShapeDtypeStruct((), jnp.float32))
+
+    def step(state: PhysState, ctrl: jax.Array) -> PhysState:
+        ctrl = jnp.asarray(ctrl, jnp.float32)
+        qpos, qvel, act, time = jax.pure_callback(runner, shapes, state.qpos, state.qvel, state.act, state.time,
+                                                  ctrl, vmap_method="broadcast_all")
+        return _observe(qpos, qvel, act, time, settings, dt)
+
+    return step
+
+
+def _mjx_backend(model, substeps, settings, dt):
+    from mujoco import mjx
+
+    with jax.ensure_compile_time_eval():
+        mx = mjx.put_model(model)
+
+    def step(state: PhysState, ctrl: jax.Array) -> PhysState:
+        data = mjx.make_data(mx).replace(qpos=state.qpos, qvel=state.qvel, act=state.act, time=state.time,
+                                         ctrl=jnp.asarray(ctrl, jnp.float32))
+
+        def sub(d, _):
+            return mjx.step(mx, d), None
+
+        with mjx_level_barriers():
+            data, _ = jax.lax.scan(sub, data, None, length=substeps)
+        return _observe(data.qpos, data.qvel, data.act, data.time, settings, dt)
+
+    return step
+
+
+def make_physics(backend: str = "mujoco", *, dt: float = 0.002, substeps: int = 10, nthread: int | None = None,
+                 settings: str = "tuned") -> SnakePhysics:
+    """The snake's physics with the given backend (see the module's notes).
+
+    Args:
+        backend: ``"mujoco"`` (MuJoCo's C engine, threaded; the choice on a
+            CPU) or ``"mjx"`` (one XLA program; the choice on an accelerator).
+        dt: physics time step, s (2 ms by default).
+        substeps: physics steps per control step (10: the paper's 20 ms control step).
+        nthread: threads of the C backend's pool (default: all CPU cores);
+            ignored by ``"mjx"``.
+        settings: ``"tuned"`` or ``"default"`` model settings (`load_mj_model`).
+
+    Returns:
+        A `SnakePhysics`.
+
+    Examples:
+        >>> phys = make_physics("mujoco")
+        >>> state = phys.step(phys.init(), jnp.zeros(16))
+        >>> round(float(state.time), 3)
+        0.02
+    """
+    if backend not in BACKENDS:
+        raise UserError(f"unknown physics backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    if int(substeps) != substeps or substeps < 1:
+        raise UserError(f"substeps must be a positive integer, got {substeps}")
+    if nthread is None:
+        nthread = os.cpu_count() or 1
+    if nthread < 1:
+        raise UserError(f"nthread must be at least 1, got {nthread}")
+    model = load_mj_model(settings, dt)
+    if backend == "mujoco":
+        step = _mujoco_backend(model, int(substeps), int(nthread), settings, dt)
+    else:
+        step = _mjx_backend(model, int(substeps), settings, dt)
+    return SnakePhysics(backend, dt, int(substeps), settings, model, _initial_state(model, settings, dt), step)
