@@ -29,6 +29,7 @@ BENCHMARKS = {
     "gaits": "robots.hexapod.bench:main",
     "robobee-network": "robots.robobee.bench_network:main_network",
     "robobee": "robots.robobee.bench:main",
+    "hough": "spikejax.vision.bench_hough:main",
 }
 
 

@@ -210,10 +210,14 @@ def test_modes_vmap_over_streams_like_single_streams():
     rng = np.random.default_rng(5)
     streams = [_random_events(rng, 40, grid.width, grid.height) for _ in range(3)]
     batch = jax.tree.map(lambda *a: jnp.stack(a).reshape(3, 4, 10), *streams)
+    times = jnp.arange(1.0, 5.0) / 4
     together = jax.vmap(lambda e: hough.async_run(params, grid, e)[1])(batch)
+    together_sync = jax.vmap(lambda e: hough.sync_run(params, grid, e, times)[1])(batch)
+    assert np.abs(np.asarray(together)).sum() > 0 and np.abs(np.asarray(together_sync)).sum() > 0
     for i in range(3):
-        alone = hough.async_run(params, grid, jax.tree.map(lambda a: a[i], batch))[1]
-        np.testing.assert_array_equal(np.asarray(together[i]), np.asarray(alone))
+        one = jax.tree.map(lambda a: a[i], batch)
+        np.testing.assert_array_equal(np.asarray(together[i]), np.asarray(hough.async_run(params, grid, one)[1]))
+        np.testing.assert_array_equal(np.asarray(together_sync[i]), np.asarray(hough.sync_run(params, grid, one, times)[1]))
 
 
 def test_bad_grids_are_refused():

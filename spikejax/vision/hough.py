@@ -308,6 +308,29 @@ def ring_offsets(grid: CircleGrid) -> np.ndarray:
 # --- votes ---------------------------------------------------------------------
 
 
+@functools.cache
+def _histogram(length: int):
+    """``(index, weight) -> zeros(length).at[index].add(weight)``, with ``0 <= index < length``."""
+
+    @jax.custom_batching.custom_vmap
+    def histogram(index, weight):
+        return jnp.zeros((length,), jnp.float32).at[index].add(weight, mode="promise_in_bounds")
+
+    @histogram.def_vmap
+    def _rule(axis_size, in_batched, index, weight):
+        # One scatter into a flat (batch * length) histogram: 1.5 times faster
+        # on a CPU than XLA's scatter with a batch dimension.
+        index = index if in_batched[0] else jnp.broadcast_to(index, (axis_size,) + index.shape)
+        weight = weight if in_batched[1] else jnp.broadcast_to(weight, (axis_size,) + weight.shape)
+        flat = index + (jnp.arange(axis_size, dtype=index.dtype) * length)[:, None]
+        out = jnp.zeros((axis_size * length,), jnp.float32).at[flat.reshape(-1)].add(
+            weight.reshape(-1), mode="promise_in_bounds"
+        )
+        return out.reshape(axis_size, length), True
+
+    return histogram
+
+
 def _weights(events: Events, signed: bool) -> jax.Array:
     w = events.p.astype(jnp.float32) if signed else jnp.ones(events.p.shape, jnp.float32)
     return jnp.where(events.valid, w, 0.0)
@@ -334,8 +357,7 @@ def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Ar
     pixel, ok = _pixel(grid, events)
     w = jnp.where(ok, _weights(events, signed), 0.0)
     cells = table[pixel]  # (capacity, n_theta)
-    acc = jnp.zeros((grid.size + 1,), jnp.float32)
-    acc = acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta))
+    acc = _histogram(grid.size + 1)(cells.reshape(-1), jnp.repeat(w, grid.n_theta))
     return acc[: grid.size].reshape(grid.shape)
 
 
@@ -400,8 +422,7 @@ def circle_votes(grid: CircleGrid, events: Events, *, signed: bool = True, metho
         w = jnp.where(ok, _weights(events, signed), 0.0)
         flat, inside = _ring_cells(grid, offsets, events.x[:, None], events.y[:, None])
         flat = jnp.where(inside, flat, grid.size)
-        acc = jnp.zeros((grid.size + 1,), jnp.float32)
-        acc = acc.at[flat.reshape(-1)].add(jnp.broadcast_to(w[:, None], flat.shape).reshape(-1))
+        acc = _histogram(grid.size + 1)(flat.reshape(-1), jnp.broadcast_to(w[:, None], flat.shape).reshape(-1))
         return acc[: grid.size].reshape(grid.shape)
     raise UserError(f"unknown circle vote method {method!r}; choose 'fft' or 'scatter'")
 
@@ -647,4 +668,37 @@ def async_run(
     """
     if state is None:
         state = init(grid)
-    return jax.lax.scan(lambda s, ev: async_step(params, grid, s, ev), state, events)
+    return _async_streams(grid)(params, state, events)
+
+
+@functools.cache
+def _async_streams(grid: Grid):
+    """:func:`async_run` for one stream, batched over streams by ``lax.map`` on a CPU.
+
+    ``jax.vmap`` of the event loop makes XLA's CPU backend copy the whole grid
+    state on every event (batched scatters inside nested loops are not done in
+    place), about 15 times slower than running the streams one after another,
+    each in place. So under ``vmap`` on a CPU this function maps over the
+    streams instead (``jax.custom_batching``); on accelerators it vmaps.
+    """
+
+    def run(params, state, events):
+        return jax.lax.scan(lambda s, ev: async_step(params, grid, s, ev), state, events)
+
+    @jax.custom_batching.custom_vmap
+    def batched(params, state, events):
+        return run(params, state, events)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, params, state, events):
+        args = (params, state, events)
+        args = jax.tree.map(
+            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, tuple(in_batched)
+        )
+        if jax.default_backend() == "cpu":
+            out = jax.lax.map(lambda a: batched(*a), args)
+        else:
+            out = jax.vmap(run)(*args)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return batched
