@@ -45,7 +45,7 @@ tracing of this backend's step: other MJX programs are untouched), which keeps
 every level materialised: the snake's step compiles in about 20 s and runs
 ten times faster than with fusion disabled. The model's free joint also sits
 on the middle module, so its tree is two chains of 8 rather than one of 16.
-`forward_kinematics` puts the same barrier between bodies, for the same reason.
+`forward_kinematics` avoids the trap by scanning along the chains.
 """
 
 from __future__ import annotations
@@ -162,17 +162,6 @@ def joint_qpos_index(model: mujoco.MjModel) -> np.ndarray:
 # ----------------------------------------------------------------- kinematics
 
 
-def _quat_mul(a, b):
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return jnp.stack([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
-
-
 def _quat_to_mat(q):
     q = q / jnp.linalg.norm(q)
     w, x, y, z = q
@@ -183,51 +172,72 @@ def _quat_to_mat(q):
     ])
 
 
-def _axis_angle_quat(axis, angle):
-    half = 0.5 * angle
-    return jnp.concatenate([jnp.cos(half)[None], jnp.sin(half) * axis])
+def _axis_rotation(axis, angle):
+    """Rotation by ``angle`` about the unit ``axis`` (Rodrigues)."""
+    k = jnp.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]], axis.dtype)
+    return jnp.eye(3, dtype=axis.dtype) + jnp.sin(angle) * k + (1 - jnp.cos(angle)) * (k @ k)
 
 
-class _Tree(NamedTuple):
-    """What `forward_kinematics` reads from the model (NumPy constants, closed over)."""
+class _Chains(NamedTuple):
+    """The snake's tree as NumPy constants: the root and its chains of hinged bodies, outward.
 
-    parent: tuple
-    joint: tuple  # per body: None, ("free", qposadr) or ("hinge", qposadr, pos, axis)
-    pos: np.ndarray
-    quat: np.ndarray
-    mass: np.ndarray
-    ipos: np.ndarray
+    ``body[c, k]`` is the ``k``-th body of chain ``c`` (all chains equally
+    long); the per-link arrays are indexed the same way.
+    """
+
+    root: int
+    root_qadr: int
+    body: np.ndarray  # (C, K) body ids
+    qadr: np.ndarray  # (C, K) qpos address of each body's hinge
+    pos: np.ndarray  # (C, K, 3) body position in its parent
+    rot: np.ndarray  # (C, K, 3, 3) body orientation in its parent
+    jnt_pos: np.ndarray  # (C, K, 3) hinge anchor in the body
+    jnt_axis: np.ndarray  # (C, K, 3) hinge axis in the body
+    mass: np.ndarray  # (nbody,)
+    ipos: np.ndarray  # (nbody, 3)
     head: int
     site_pos: np.ndarray
-    site_quat: np.ndarray
+    site_rot: np.ndarray
 
 
 @functools.cache
-def _tree(model_key) -> _Tree:
+def _chains(model_key) -> _Chains:
     model = load_mj_model(*model_key)
-    joints = []
-    for b in range(model.nbody):
-        if model.body_jntnum[b] == 0:
-            joints.append(None)
-            continue
-        j = model.body_jntadr[b]
-        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-            joints.append(("free", int(model.jnt_qposadr[j])))
-        else:
-            joints.append(("hinge", int(model.jnt_qposadr[j]), model.jnt_pos[j].copy(), model.jnt_axis[j].copy()))
+    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    root = int(model.jnt_bodyid[free[0]])
+    children = {b: [c for c in range(1, model.nbody) if model.body_parentid[c] == b] for b in range(model.nbody)}
+    chains = []
+    for first in children[root]:
+        chain = [first]
+        while children[chain[-1]]:
+            chain.extend(children[chain[-1]])
+        chains.append(chain)
+    for chain in chains:
+        if len(chain) != len(chains[0]) or any(model.body_jntnum[b] != 1 for b in chain):
+            raise AssertionError("the snake must be a root with equal chains of one-hinge bodies")
+    body = np.array(chains)
+    jnt = model.body_jntadr[body]
+    rot = np.zeros(body.shape + (3, 3))
+    for c, k in np.ndindex(body.shape):
+        mujoco.mju_quat2Mat(rot[c, k].reshape(9), model.body_quat[body[c, k]])
     site = model.site(HEAD_SITE)
-    return _Tree(tuple(int(p) for p in model.body_parentid), tuple(joints), model.body_pos.copy(),
-                 model.body_quat.copy(), model.body_mass.copy(), model.body_ipos.copy(), int(site.bodyid[0]),
-                 site.pos.copy(), site.quat.copy())
+    site_rot = np.zeros(9)
+    mujoco.mju_quat2Mat(site_rot, site.quat)
+    return _Chains(root, int(model.jnt_qposadr[free[0]]), body, model.jnt_qposadr[jnt], model.body_pos[body], rot,
+                   model.jnt_pos[jnt], model.jnt_axis[jnt], model.body_mass.copy(), model.body_ipos.copy(),
+                   int(site.bodyid[0]), site.pos.copy(), site_rot.reshape(3, 3))
 
 
 def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float = 0.002):
     """World poses of the snake's bodies, the head camera and the centre of mass from ``qpos``, in JAX.
 
     The same computation as MuJoCo's ``mj_kinematics`` for this tree (a free
-    joint and hinges whose axes pass through their ``pos``), written out so
-    that both backends' observations are JAX functions of the state and so
-    the MJX program needs no extra kinematics pass.
+    root body and two chains of hinged bodies), written out so that both
+    backends' observations are JAX functions of the state and the MJX program
+    needs no extra kinematics pass. Each chain is a ``lax.scan`` outward from
+    the root (and the two chains a ``vmap``): unrolled, XLA's fusion would
+    inline every parent's pose into its child's and the program would grow
+    exponentially along the chain.
 
     Args:
         qpos: ``(23,)``.
@@ -237,33 +247,35 @@ def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float = 0.0
         ``(xpos (18, 3), xmat (18, 3, 3), head_pos (3,), head_mat (3, 3), com_pos (3,))``;
         body 0 is the world.
     """
-    tree = _tree((settings, dt))
+    tree = _chains((settings, dt))
     dtype = qpos.dtype
-    xpos = [jnp.zeros(3, dtype)]
-    xquat = [jnp.array([1.0, 0.0, 0.0, 0.0], dtype)]
-    for b in range(1, len(tree.parent)):
-        p = tree.parent[b]
-        pos = xpos[p] + _quat_to_mat(xquat[p]) @ jnp.asarray(tree.pos[b], dtype)
-        quat = _quat_mul(xquat[p], jnp.asarray(tree.quat[b], dtype))
-        joint = tree.joint[b]
-        if joint is not None and joint[0] == "free":
-            adr = joint[1]
-            pos, quat = qpos[adr:adr + 3], qpos[adr + 3:adr + 7] / jnp.linalg.norm(qpos[adr + 3:adr + 7])
-        elif joint is not None:
-            _, adr, jpos, axis = joint
-            anchor = pos + _quat_to_mat(quat) @ jnp.asarray(jpos, dtype)
-            quat = _quat_mul(quat, _axis_angle_quat(jnp.asarray(axis, dtype), qpos[adr]))
-            pos = anchor - _quat_to_mat(quat) @ jnp.asarray(jpos, dtype)
-        # Without the barrier XLA's fusion inlines every parent's pose into each child's,
-        # so the fused program grows exponentially along the chain (seconds per call).
-        pos, quat = jax.lax.optimization_barrier((pos, quat))
-        xpos.append(pos)
-        xquat.append(quat)
-    xpos = jnp.stack(xpos)
-    xmat = jax.vmap(_quat_to_mat)(jnp.stack(xquat))
+    a = tree.root_qadr
+    root_pos, root_mat = qpos[a:a + 3], _quat_to_mat(qpos[a + 3:a + 7])
+    links = tuple(jnp.asarray(x, dtype) for x in (tree.pos, tree.rot, tree.jnt_pos, tree.jnt_axis))
+    angles = qpos[tree.qadr]
+
+    def link(carry, x):
+        pos, mat = carry
+        body_pos, body_rot, jnt_pos, axis, angle = x
+        pos = pos + mat @ body_pos
+        mat = mat @ body_rot
+        anchor = pos + mat @ jnt_pos
+        mat = mat @ _axis_rotation(axis, angle)
+        pos = anchor - mat @ jnt_pos
+        return (pos, mat), (pos, mat)
+
+    def chain(*xs):
+        _, out = jax.lax.scan(link, (root_pos, root_mat), xs)
+        return out
+
+    chain_pos, chain_mat = jax.vmap(chain)(*links, angles)
+    nbody = len(tree.mass)
+    xpos = jnp.zeros((nbody, 3), dtype).at[tree.root].set(root_pos).at[tree.body].set(chain_pos)
+    xmat = jnp.broadcast_to(jnp.eye(3, dtype=dtype), (nbody, 3, 3))
+    xmat = xmat.at[tree.root].set(root_mat).at[tree.body].set(chain_mat)
     h = tree.head
     head_pos = xpos[h] + xmat[h] @ jnp.asarray(tree.site_pos, dtype)
-    head_mat = xmat[h] @ _quat_to_mat(jnp.asarray(tree.site_quat, dtype))
+    head_mat = xmat[h] @ jnp.asarray(tree.site_rot, dtype)
     mass = jnp.asarray(tree.mass, dtype)
     xipos = xpos + jnp.einsum("bij,bj->bi", xmat, jnp.asarray(tree.ipos, dtype))
     com_pos = jnp.sum(mass[:, None] * xipos, axis=0) / jnp.sum(mass)
