@@ -1,0 +1,58 @@
+"""``spikejax bench hough`` on one stream: the table it writes and the frames it times."""
+
+import argparse
+import csv
+
+import numpy as np
+from skimage.transform import hough_line
+
+from spikejax.vision import bench_hough, hough
+
+
+def test_bench_frames_are_the_peers_frames():
+    events, images = bench_hough.frames("line", n=2)
+    counts = np.asarray(events.count())
+    assert np.all((counts > 1500) & (counts < bench_hough.CAPACITY))
+    assert images[0].sum() == counts[0]  # one event per pixel: the peers see every event
+    d = int(np.ceil(np.hypot(128, 128)))
+    grid = hough.LineGrid(n_rho=2 * d + 1, origin=(0, 0), rho_offset=d)
+    ours = np.asarray(hough.line_votes(grid, type(events)(*(a[0] for a in events)), signed=False))
+    np.testing.assert_array_equal(ours, hough_line(images[0], grid.skimage_thetas())[0].T)
+
+
+def test_bench_writes_every_implementation(tmp_path):
+    args = argparse.Namespace(trials=1, out=str(tmp_path), repeats=1)
+    assert bench_hough.main(args) == 0
+    with open(tmp_path / "hough.csv") as f:
+        rows = list(csv.DictReader(f))
+    names = {(r["shape"], r["implementation"], r["mode"]) for r in rows}
+    for shape, name, mode in [
+        ("line", "skimage hough_line", "per frame"),
+        ("circle", "skimage hough_circle (64 radii)", "per frame"),
+        ("line", "OpenCV HoughLines", "per frame"),
+        ("circle", "OpenCV HoughCircles", "per frame"),
+        ("line", "NumPy per-event loop", "async"),
+        ("line", "spikejax LineGrid (votes + LIF + inhibition)", "sync"),
+        ("circle", "spikejax CircleGrid (votes + LIF + inhibition)", "sync"),
+        ("line", "spikejax LineGrid (votes + LIF + inhibition)", "async"),
+    ]:
+        assert (shape, name, mode) in names
+    for r in rows:
+        assert np.isclose(float(r["frames_per_s"]) * float(r["run_s"]), float(r["frames"]))
+        if r["implementation"].startswith("spikejax"):
+            assert float(r["compile_s"]) > 0  # reported apart from the run time
+    sync_line = next(r for r in rows if r["mode"] == "sync" and r["shape"] == "line")
+    assert int(sync_line["frames"]) == bench_hough.N_FRAMES
+    assert (tmp_path / "hough.png").stat().st_size > 0
+
+
+def test_modes_agree_on_sparse_slots_and_differ_on_dense_ones():
+    import jax
+
+    events, _ = bench_hough.frames("line", n=1)
+    first = jax.tree.map(lambda a: a[0, :400], events)
+    sparse = bench_hough.mode_difference(jax.tree.map(lambda a: a[:, None], first))
+    assert sparse["async_spikes"] > 0
+    assert sparse["sync_spikes"] == sparse["async_spikes"] and sparse["shared"] == 1.0
+    dense = bench_hough.mode_difference(jax.tree.map(lambda a: a[None], first))
+    assert dense["sync_spikes"] != dense["async_spikes"]
