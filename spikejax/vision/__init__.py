@@ -3,6 +3,9 @@
 from spikejax.vision.events import Events
 from spikejax.vision.events import compact
 from spikejax.vision.events import empty
+from spikejax.vision.hough import CircleGrid
+from spikejax.vision.hough import LineGrid
+from spikejax.vision.hough import hough_params
 from spikejax.vision.io import Recording
 from spikejax.vision.io import from_structured
 from spikejax.vision.io import to_structured
@@ -16,6 +19,9 @@ __all__ = [
     "Events",
     "compact",
     "empty",
+    "LineGrid",
+    "CircleGrid",
+    "hough_params",
     "Recording",
     "from_structured",
     "to_structured",
