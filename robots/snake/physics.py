@@ -23,16 +23,21 @@ The state is float32 (JAX's default), so the C backend rounds its float64
 state to float32 once per control step; positions carry about 1e-7 m of
 rounding, far below the contact solver's tolerance.
 
-One control step is ``substeps`` physics steps of ``dt`` with the control held
-(the paper's 20 ms control step by default: 10 steps of 2 ms).
+One control step is ``substeps`` physics steps of ``dt`` with the control held;
+it is the paper's 20 ms control step by default (Sec. II-D of the snake R-STDP
+paper: "a fixed simulating timestep that is 20ms").
 
 Model settings (`load_mj_model`): ``"default"`` is ``snake.xml`` as written
-(MuJoCo's default solver: Newton, 100 iterations, 50 line-search iterations,
-contacts from contype/conaffinity); ``"tuned"`` (the default here) replaces the
-collision filter by explicit floor-module contact pairs and caps the solver at
-`TUNED_ITERATIONS` / `TUNED_LS_ITERATIONS`, which ``tests/test_snake_physics.py``
-shows keeps the straight forward speed and the turning rate within 5 % of the
-default settings.
+(MuJoCo's default solver: Newton, 100 iterations, 50 line-search iterations;
+contacts from contype/conaffinity; ``dt`` 2 ms, 10 per control step);
+``"tuned"`` (the default here) replaces the collision filter by explicit
+floor-module contact pairs (condim 3, the same friction), caps the solver at
+`TUNED_ITERATIONS` iterations and `TUNED_LS_ITERATIONS` line-search iterations,
+and doubles the time step to `TUNED_DT` (5 per control step): half the physics
+steps, each cheaper. ``tests/test_snake_physics.py`` checks that the straight
+forward speed and the turning rate stay within 5 % of the default settings run
+by MuJoCo's C engine (measured: within 2 %; with 4 iterations the turning
+rate is 30 % off, with 2 the forward speed; with fewer the step diverges).
 
 XLA trap (``KNOWN-TRAPS.md``): with jax 0.10.2, XLA's fusion pass on a CPU
 took minutes or forever on ``mjx.step`` of a long kinematic chain. The cause:
@@ -70,6 +75,9 @@ __all__ = [
     "HEAD_BODY",
     "HEAD_SITE",
     "MODEL_PATH",
+    "CONTROL_DT",
+    "DEFAULT_DT",
+    "TUNED_DT",
     "TUNED_ITERATIONS",
     "TUNED_LS_ITERATIONS",
     "PhysState",
@@ -86,8 +94,11 @@ BACKENDS = ("mujoco", "mjx")
 HEAD_BODY = "module0"
 HEAD_SITE = "head_camera"
 N_MODULES = 17
-TUNED_ITERATIONS = 4
-TUNED_LS_ITERATIONS = 8
+TUNED_ITERATIONS = 6
+TUNED_LS_ITERATIONS = 6
+TUNED_DT = 0.004  # s
+DEFAULT_DT = 0.002  # s
+CONTROL_DT = 0.02  # s, the paper's control step
 
 
 class PhysState(NamedTuple):
@@ -118,7 +129,7 @@ class PhysState(NamedTuple):
 
 
 @functools.cache
-def load_mj_model(settings: str = "tuned", dt: float = 0.002) -> mujoco.MjModel:
+def load_mj_model(settings: str = "tuned", dt: float | None = None) -> mujoco.MjModel:
     """The compiled snake for MuJoCo's C engine (cached), with ``settings`` and time step ``dt``.
 
     Args:
@@ -127,13 +138,15 @@ def load_mj_model(settings: str = "tuned", dt: float = 0.002) -> mujoco.MjModel:
             each module (no geom-pair filtering at run time, no
             self-collision), `TUNED_ITERATIONS` solver iterations and
             `TUNED_LS_ITERATIONS` line-search iterations.
-        dt: physics time step, s.
+        dt: physics time step, s (default: `DEFAULT_DT` or `TUNED_DT`).
 
     Returns:
         The model (treat it as read-only: it is shared).
     """
     if settings not in ("default", "tuned"):
         raise UserError(f"unknown snake model settings {settings!r}; expected 'default' or 'tuned'")
+    if dt is None:
+        dt = TUNED_DT if settings == "tuned" else DEFAULT_DT
     if not dt > 0:
         raise UserError(f"physics time step must be positive, got dt={dt}")
     spec = mujoco.MjSpec.from_file(str(MODEL_PATH))
@@ -228,7 +241,7 @@ def _chains(model_key) -> _Chains:
                    int(site.bodyid[0]), site.pos.copy(), site_rot.reshape(3, 3))
 
 
-def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float = 0.002):
+def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float | None = None):
     """World poses of the snake's bodies, the head camera and the centre of mass from ``qpos``, in JAX.
 
     The same computation as MuJoCo's ``mj_kinematics`` for this tree (a free
@@ -321,8 +334,15 @@ def _initial_state(model: mujoco.MjModel, settings: str, dt: float) -> Callable[
     qvel = jnp.zeros(model.nv, jnp.float32)
     act = jnp.zeros(model.na, jnp.float32)
 
+    @functools.cache
+    def resting() -> PhysState:
+        # Concrete even when first asked for inside a trace, so the cache never holds a tracer.
+        with jax.ensure_compile_time_eval():
+            observe = jax.jit(functools.partial(_observe, settings=settings, dt=dt))
+            return observe(qpos, qvel, act, jnp.zeros((), jnp.float32))
+
     def init() -> PhysState:
-        return _observe(qpos, qvel, act, jnp.zeros((), jnp.float32), settings, dt)
+        return resting()
 
     return init
 
@@ -432,15 +452,17 @@ def _mjx_backend(model, substeps, settings, dt):
     return step
 
 
-def make_physics(backend: str = "mujoco", *, dt: float = 0.002, substeps: int = 10, nthread: int | None = None,
-                 settings: str = "tuned") -> SnakePhysics:
+def make_physics(backend: str = "mujoco", *, dt: float | None = None, substeps: int | None = None,
+                 nthread: int | None = None, settings: str = "tuned") -> SnakePhysics:
     """The snake's physics with the given backend (see the module's notes).
 
     Args:
         backend: ``"mujoco"`` (MuJoCo's C engine, threaded; the choice on a
             CPU) or ``"mjx"`` (one XLA program; the choice on an accelerator).
-        dt: physics time step, s (2 ms by default).
-        substeps: physics steps per control step (10: the paper's 20 ms control step).
+        dt: physics time step, s (default: `TUNED_DT`, 4 ms, or with
+            ``settings="default"`` `DEFAULT_DT`, 2 ms).
+        substeps: physics steps per control step (default: as many as make
+            the paper's 20 ms control step, `CONTROL_DT`).
         nthread: threads of the C backend's pool (default: all CPU cores);
             ignored by ``"mjx"``.
         settings: ``"tuned"`` or ``"default"`` model settings (`load_mj_model`).
@@ -456,6 +478,12 @@ def make_physics(backend: str = "mujoco", *, dt: float = 0.002, substeps: int = 
     """
     if backend not in BACKENDS:
         raise UserError(f"unknown physics backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    if settings not in ("default", "tuned"):
+        raise UserError(f"unknown snake model settings {settings!r}; expected 'default' or 'tuned'")
+    if dt is None:
+        dt = TUNED_DT if settings == "tuned" else DEFAULT_DT
+    if substeps is None:
+        substeps = max(1, round(CONTROL_DT / dt))
     if int(substeps) != substeps or substeps < 1:
         raise UserError(f"substeps must be a positive integer, got {substeps}")
     if nthread is None:

@@ -1,0 +1,128 @@
+"""The slithering gait: Eq. (1) by hand, the head compensation's closed form, and what the snake does under it."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from robots.snake.gait import JOINT_LIMIT
+from robots.snake.gait import camera_offset
+from robots.snake.gait import default_gait
+from robots.snake.gait import gait_period
+from robots.snake.gait import head_compensation
+from robots.snake.gait import joint_targets
+from robots.snake.physics import make_physics
+
+
+def test_eq1_by_hand():
+    p = default_gait()._replace(P_head=0.5, P_tail=1.0, C_e=0.05)
+    t, steer = 0.7, 0.2
+    alpha = np.asarray(joint_targets(p, t, steer, compensate=False))
+    for i in range(1, 17):
+        P = 0.5 + 0.5 * (i - 1) / 15
+        if i % 2:
+            expected = P * p.A_o * math.sin(i * p.Omega_o + t * p.omega_o + p.delta_o) + steer
+        else:
+            expected = P * p.A_e * math.sin(i * p.Omega_e + t * p.omega_e) + p.C_e
+        assert alpha[i - 1] == pytest.approx(expected, abs=1e-6), i
+
+
+def test_head_compensation_zeroes_the_mean_module_yaw():
+    """With the compensated first joint, sum over odd j of (17 - j) alpha_j, 17 x the modules' mean yaw, is 0."""
+    p = default_gait()
+    j = np.arange(1, 17)
+    weights = np.where(j % 2 == 1, 17 - j, 0)
+    for t in np.linspace(0.0, 2.5, 7):
+        alpha = np.asarray(joint_targets(p, t, 0.05))
+        assert np.abs(alpha).max() < JOINT_LIMIT  # no clipping at these values
+        assert float(weights @ alpha) == pytest.approx(0.0, abs=1e-5)
+    alpha = np.asarray(joint_targets(p, 0.3, compensate=False))
+    assert float(head_compensation(jnp.asarray(alpha))) == pytest.approx(-(weights[2:] @ alpha[2:]) / 16, abs=1e-6)
+
+
+def test_head_offset_adds_to_the_first_joint_and_targets_are_clipped():
+    p = default_gait()
+    base = joint_targets(p, 1.0, 0.0)
+    shifted = joint_targets(p, 1.0, 0.0, 0.3)
+    np.testing.assert_allclose(shifted - base, np.eye(16)[0] * 0.3, atol=1e-6)
+    assert float(jnp.max(jnp.abs(joint_targets(p, 1.0, 3.0)))) == pytest.approx(JOINT_LIMIT)
+
+
+def test_camera_offset_eq6_phase_identity():
+    """For theta = a sin(wt + phi), Eq. (5)'s theta_tuned is alpha a sin(wt + phi + phi_pos)."""
+    a, w, phi, alpha, phi_pos, A = math.radians(35), 2.0, 0.4, 2.571, 0.908, 1.4
+    for t in (0.0, 0.3, 1.1):
+        theta, theta_dot = a * math.sin(w * t + phi), a * w * math.cos(w * t + phi)
+        expected = A * math.sin(alpha * a * math.sin(w * t + phi + phi_pos))
+        assert float(camera_offset(theta, theta_dot, w, A, alpha, phi_pos)) == pytest.approx(expected, abs=1e-5)
+
+
+# ----------------------------------------------------------------- on the robot
+
+PERIOD = float(gait_period(default_gait()))
+SECONDS = 4 * PERIOD
+CONTROL_DT = 0.02
+# (steer, compensate) of each simulated snake, all in one batch.
+CASES = [(0.0, True), (0.1, True), (-0.1, True), (0.0, False)]
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """Four snakes for four gait periods (10 s), batched: head pose and centre of mass every control step."""
+    phys = make_physics("mujoco")
+    gait = default_gait()
+    n = int(round(SECONDS / CONTROL_DT))
+
+    def run(steer, compensate):
+        def body(state, _):
+            state = phys.step(state, joint_targets(gait, state.time, steer, 0.0, compensate))
+            return state, (state.time, state.head_mat, state.com_pos)
+
+        return jax.lax.scan(body, phys.init(), None, length=n)[1]
+
+    steers = jnp.array([c[0] for c in CASES])
+    compensate = jnp.array([c[1] for c in CASES])
+    time, head_mat, com = jax.jit(jax.vmap(run))(steers, compensate)
+    yaw = np.unwrap(np.arctan2(head_mat[..., 1, 0], head_mat[..., 0, 0]), axis=1)
+    return np.asarray(time[0]), yaw, np.asarray(com)
+
+
+def _per_period(x, per):
+    return x[:, :(x.shape[1] // per) * per].reshape(x.shape[0], -1, per, *x.shape[2:])
+
+
+def test_straight_gait_moves_forward_steadily(runs):
+    time, yaw, com = runs
+    per = int(round(PERIOD / CONTROL_DT))
+    ends = _per_period(com, per)[0, :, -1, :2]  # the straight snake's position at the end of each period
+    advance = np.diff(ends[:, 0])  # along +x, where the head looked at rest
+    speed = advance / PERIOD
+    assert np.all(speed > 0.05), speed  # forward, m/s
+    assert np.ptp(speed) < 0.2 * speed.mean(), speed  # steady from period to period
+    assert abs(ends[-1, 1] - ends[0, 1]) < 0.2 * (ends[-1, 0] - ends[0, 0])  # and straight
+
+
+def test_sign_of_C_o_sets_the_sign_of_the_turn(runs):
+    time, yaw, com = runs
+    per = int(round(PERIOD / CONTROL_DT))
+    mean_yaw = _per_period(yaw, per).mean(axis=2)
+    turn = (mean_yaw[:, -1] - mean_yaw[:, 1]) / (2 * PERIOD)  # rad/s, after the first period
+    straight, right, left = turn[0], turn[1], turn[2]
+    assert right < -0.03 and left > 0.03  # C_o > 0 turns clockwise, C_o < 0 counter-clockwise
+    assert abs(straight) < 0.25 * min(-right, left)
+
+
+def test_head_compensation_reduces_head_yaw_oscillation(runs):
+    time, yaw, com = runs
+    per = int(round(PERIOD / CONTROL_DT))
+    steady = slice(per, None)
+
+    def oscillation(y):
+        # Head yaw about its trend (a slow drift of the heading is not oscillation).
+        t = time[steady]
+        return np.std(y[steady] - np.polyval(np.polyfit(t, y[steady], 1), t))
+
+    with_comp, without = oscillation(yaw[0]), oscillation(yaw[3])
+    assert with_comp < 0.7 * without, (with_comp, without)
