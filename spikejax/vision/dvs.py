@@ -4,14 +4,14 @@ Two models, both written for one camera (``jax.vmap`` adds cameras) and
 returning fixed-capacity :class:`~spikejax.vision.events.Events` with the count
 of events that did not fit (DESIGN rule 4):
 
-* :func:`frame_difference`: the simple mode of the DVS plugins the snake papers
-  used in their simulators (the NRP/Gazebo DVS camera plugin): one event per
-  pixel whose intensity changed by at least ``threshold`` between two rendered
-  frames, polarity the sign of the change, and all events of a frame stamped
-  with the frame's time. The difference is taken on intensities in ``[0, 1]``
-  by default (as the plugin does on 8-bit grey levels); ``log=True`` takes it on
-  ``log(I + eps)`` instead, which makes the threshold a contrast, as in a real
-  DVS pixel.
+* :func:`frame_difference`: the simple model of the DVS camera plugins of the
+  robot simulators the snake papers used (NRP, V-REP): the simulator renders
+  frames, and a pixel whose intensity changed by at least ``threshold`` since
+  the previous frame emits one event, polarity the sign of the change, all
+  events of a frame stamped with the frame's time. The difference is taken on
+  intensities in ``[0, 1]`` by default, as those plugins compare rendered grey
+  levels; ``log=True`` takes it on ``log(I + eps)`` instead, which makes the
+  threshold a contrast, as in a real DVS pixel. The paper does not say which.
 * :func:`init` / :func:`step` / :func:`emulate`: a contrast-threshold emulator in
   the manner of ESIM and v2e. Each pixel keeps a reference log intensity; while
   the log intensity moves (linearly in time between two frames) away from the

@@ -44,6 +44,17 @@ the threshold (``|v| >= v_th`` by more than one vote), opposite votes within a
 slot cancel before they can fire, the decay within a slot is ignored, and the
 inhibition of a spike acts at the end of the slot rather than on the later
 events of the slot. With at most one event per slot they agree exactly.
+
+How it is computed (each choice measured against the alternatives, see
+:mod:`spikejax.vision.bench_hough`): line votes are one scatter-add of each
+event's ``n_theta`` cells, read from a static (pixel, angle) -> cell table
+(:func:`line_table`); circle votes are the event image convolved with the ring
+kernels by FFT; the asynchronous loop gathers the ``(v, t_last)`` of the cells an
+event touches and scatter-adds the change, with firing and inhibition in a
+loop taken only when some cell crosses the threshold. Under ``vmap``, the line
+scatters of all streams are folded into one flat scatter, and on a CPU the
+asynchronous streams run one after another (custom batching rules), both
+faster there than XLA's batched scatters.
 """
 
 from __future__ import annotations
