@@ -132,9 +132,14 @@ def get(name: str) -> Track:
     return mirror(track) if mirrored else track
 
 
+def training_mirror(episode):
+    """Whether episode ``episode`` runs the 8 mirrored: odd episodes are (Fig. 5 caption)."""
+    return episode % 2 == 1
+
+
 def training_track(episode: int) -> Track:
     """The 8 of episode ``episode``: as drawn for even episodes, mirrored for odd ones (Fig. 5 caption)."""
-    return mirror(eight()) if episode % 2 else eight()
+    return mirror(eight()) if training_mirror(episode) else eight()
 
 
 def _segment(track: Track, s):
@@ -176,13 +181,13 @@ def wrap(angle):
     return (angle + jnp.pi) % (2 * jnp.pi) - jnp.pi
 
 
-def target_angles(head_xy, head_forward_xy, target_xy, head_offset):
+def target_angles(head_xy, head_forward_xy, target_xy, d_head):
     """The angles of the target to the head and to the body, Eq. (12) of the snake R-STDP paper.
 
     ``a_head`` is the angle between the head's forward direction (projected on
     the ground) and the direction from the head to the target, positive when
     the target is to the right, so that a positive angle rewards the right
-    output neuron as in Eq. (9). ``head_offset`` is ``d_head``, the head's yaw
+    output neuron as in Eq. (9). ``d_head`` is the head's yaw
     deflection commanded by the head controller, positive to the left
     (counter-clockwise seen from above); ``a_body = a_head - d_head`` (Eq. 12)
     is then the angle between the body's direction and the target.
@@ -192,4 +197,4 @@ def target_angles(head_xy, head_forward_xy, target_xy, head_offset):
     bearing = jnp.arctan2(to_target[1], to_target[0])
     facing = jnp.arctan2(head_forward_xy[1], head_forward_xy[0])
     a_head = wrap(facing - bearing)
-    return a_head, a_head - head_offset
+    return a_head, a_head - d_head

@@ -1,0 +1,54 @@
+"""The snake's head camera: its pose from the physics state and the scene it sees.
+
+The camera is the site ``head_camera`` of ``snake.xml``, at the front face of
+the head module, looking along the head's +x with +z up; its world pose is in
+the physics state (``head_pos``, ``head_mat``), whichever backend produced it,
+and its frame axes (forward, left, up) are those :func:`spikejax.vision.render.render`
+expects, so the head's rotation matrix is the camera's.
+
+The scene is the papers' world: the target sphere of radius 0.3 m resting on
+the ground (section II-A of the snake R-STDP paper), the ground plane and,
+optionally, pipes (standing and lying cylinders, section 3.1 of the
+pipe-tracking paper). Brightness values are grey levels in [0, 1]: a dark
+target on a mid-grey floor under a bright sky, so that the target's outline
+makes events against either background.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+
+from robots.snake.tracks import TARGET_RADIUS
+from spikejax.vision import render as R
+
+HEAD_CAMERA = R.Camera(width=128, height=128, fov=math.radians(60.0))  # DVS128; fovy=60 in snake.xml
+TARGET_BRIGHTNESS = 0.08
+GROUND_BRIGHTNESS = 0.4
+SKY_BRIGHTNESS = 0.8
+
+
+def scene(target_xy, pipes: R.Cylinders | None = None, target_radius: float = TARGET_RADIUS) -> R.Scene:
+    """The target sphere resting on the ground at ``target_xy`` (2,), the ground, the sky and ``pipes``."""
+    target_xy = jnp.asarray(target_xy, jnp.float32)
+    center = jnp.concatenate([target_xy, jnp.full((1,), target_radius, jnp.float32)])
+    return R.Scene(
+        spheres=R.spheres(center, target_radius, TARGET_BRIGHTNESS),
+        cylinders=R.no_cylinders() if pipes is None else pipes,
+        ground_height=0.0,
+        ground_brightness=GROUND_BRIGHTNESS,
+        sky_brightness=SKY_BRIGHTNESS,
+    )
+
+
+def pose(phys) -> tuple[jax.Array, jax.Array]:
+    """The camera's position (3,) and rotation (3, 3) (columns: forward, left, up) from a physics state."""
+    return phys.head_pos, phys.head_mat
+
+
+def frame(phys, world: R.Scene, camera: R.Camera = HEAD_CAMERA) -> jax.Array:
+    """The head camera's ``(128, 128)`` grey-level frame of ``world`` for the physics state ``phys``."""
+    pos, rot = pose(phys)
+    return R.render(world, pos, rot, camera)

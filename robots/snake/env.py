@@ -1,0 +1,247 @@
+"""The snake's target-tracking task as a Brax ``Env``: steer the slithering gait after a moving sphere.
+
+:class:`SnakeEnv` subclasses :class:`brax.envs.base.Env` and returns Brax's
+:class:`~brax.envs.base.State`, so Brax's wrappers and trainers (e.g. PPO)
+drive it as they drive their own envs, and the SNN controllers of the snake
+papers drive it through the same ``reset`` / ``step``.
+
+One ``step`` is one control step (20 ms, the paper's): the gait of Eq. (1)
+(:func:`robots.snake.gait.joint_targets`) is evaluated at the step's start
+with the action's steering and head offset and held by the servos while the
+physics backend (``"mujoco"`` or ``"mjx"``, :func:`robots.snake.physics.make_physics`)
+advances; then the target moves along its track (:func:`robots.snake.tracks.advance`),
+the head camera renders the scene (:mod:`robots.snake.camera`) and the
+frame-difference DVS (:func:`spikejax.vision.dvs.frame_difference`, the
+papers' simulator mode) turns the change since the last frame into events.
+
+Spaces:
+
+* ``action`` ``(2,)`` in [-1, 1] (clipped): ``action[0]`` the steering input,
+  ``C_o = action[0] * max_steer`` (positive turns right, like ``D_t`` of
+  Eq. (5) with the right neuron winning); ``action[1]`` the head offset,
+  ``action[1] * max_head_offset`` added to the first joint (positive turns the
+  head right).
+* ``obs`` ``(18,)``: ``[a_head, a_body, alpha_1 .. alpha_16]``: the target's
+  angle to the head and to the body (Eq. (12), radians, positive when the
+  target is on the right) and the 16 joint angles (radians, joint 1 at the
+  head). A flat vector, as Brax's trainers expect.
+* ``info["events"]``: the DVS events of the control step, a fixed-capacity
+  :class:`spikejax.vision.Events` (``event_capacity`` slots, stamped with the
+  step's end time) with ``info["overflow"]`` counting those that did not fit.
+  They live in ``info`` rather than ``obs`` because an event buffer is not a
+  flat vector; the SNN controllers read them from there. ``info["frame"]`` is
+  the camera's last grey-level frame (the reference for the next step's
+  events).
+* ``reward = -|a_head|``: the head should face the target.
+* ``done = 1`` when the target is lost, the paper's reset rule (section III-B):
+  ``|a_head| > 40`` degrees, or the mean of ``a_body`` over the last gait
+  period beyond 35 degrees (the paper's 625-step window is "a movement period
+  of the snake robot").
+
+Eq. (12), ``a_body = a_head - d_head``, takes ``d_head`` positive when the head
+is turned left; the head offset here is positive to the right, so
+``d_head = -head_offset``.
+
+The track is static (``track=``); ``reset(rng, mirror=...)`` mirrors it about
+the x axis, which is how the training track alternates direction each episode
+(:func:`robots.snake.tracks.training_mirror`). The tracks are laid out in the
+paper's frame (snake at (-5, 0)) and shifted so that the paper's start is the
+snake's head at rest. Nothing in the task is random: ``rng`` is accepted for
+Brax's interface and kept in ``info["rng"]``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from brax.envs.base import Env, State
+
+from robots.snake import camera as cam
+from robots.snake import tracks as T
+from robots.snake.gait import GaitParams, default_gait, gait_period, joint_targets
+from robots.snake.physics import CONTROL_DT, joint_qpos_index, make_physics
+from spikejax.errors import UserError
+from spikejax.vision import dvs
+from spikejax.vision import render as R
+
+SNAKE_SPEED = 0.108  # m/s, straight gait with the default GaitParams and tuned physics (measured)
+LOST_HEAD_ANGLE = math.radians(40.0)  # section III-B
+LOST_BODY_ANGLE = math.radians(35.0)  # section III-B
+
+
+class SnakeEnv(Env):
+    """Follow the target sphere along a track with the slithering snake (see the module docstring).
+
+    Args:
+        track: one of :data:`robots.snake.tracks.TRACKS`.
+        backend: physics backend, ``"mujoco"`` (MuJoCo C, the choice on a CPU) or ``"mjx"``.
+        camera: render the head camera and emit events each step; ``False``
+            leaves ``info["events"]`` empty (for controllers that only read the
+            angles, and for speed).
+        event_threshold: frame-difference threshold on grey levels in [0, 1].
+        event_capacity: event slots per control step.
+        target_speed: the target's speed along the track, m/s; "a little faster
+            than the snake" (section II-A): 1.2 times its straight speed.
+        max_steer: ``C_o`` at full action, rad.
+        max_head_offset: head offset at full action, rad.
+        compensate: the gait's head compensation (section II-A).
+        gait: the gait's parameters (``C_o`` is replaced by the steering).
+        pipes: optional pipes in the scene (track frame, as ``render.Cylinders``).
+        physics_kwargs: passed to :func:`robots.snake.physics.make_physics`.
+    """
+
+    def __init__(self, track: str = "eight", backend: str = "mujoco", *, camera: bool = True,
+                 event_threshold: float = 0.05, event_capacity: int = 2048, target_speed: float = 1.2 * SNAKE_SPEED,
+                 max_steer: float = 0.25, max_head_offset: float = 0.5, compensate: bool = True,
+                 gait: GaitParams | None = None, pipes: R.Cylinders | None = None, **physics_kwargs: Any):
+        if event_capacity < 1:
+            raise UserError(f"event_capacity must be at least 1, got {event_capacity}")
+        if not event_threshold > 0:
+            raise UserError(f"event_threshold must be positive, got {event_threshold}")
+        if not target_speed > 0:
+            raise UserError(f"target_speed must be positive, got {target_speed}")
+        self._track = T.get(track)  # raises UserError for an unknown name
+        self.track_name = track
+        self.physics = make_physics(backend, **physics_kwargs)
+        self._joints = np.asarray(joint_qpos_index(self.physics.mj_model))
+        self.camera_on = bool(camera)
+        self.event_threshold = float(event_threshold)
+        self.event_capacity = int(event_capacity)
+        self.target_speed = float(target_speed)
+        self.max_steer = float(max_steer)
+        self.max_head_offset = float(max_head_offset)
+        self.compensate = bool(compensate)
+        self.gait = default_gait() if gait is None else gait
+        self.pipes = pipes
+        self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
+        head0 = np.asarray(self.physics.init().head_pos[:2])
+        self.origin = jnp.asarray(head0 - np.asarray(T.START), jnp.float32)  # track frame -> world frame
+
+    # ------------------------------------------------------------ Brax interface
+
+    @property
+    def dt(self) -> float:
+        """Control step, s."""
+        return self.physics.dt * self.physics.substeps
+
+    @property
+    def observation_size(self) -> int:
+        return 2 + 16
+
+    @property
+    def action_size(self) -> int:
+        return 2
+
+    @property
+    def backend(self) -> str:
+        return self.physics.backend
+
+    def reset(self, rng: jax.Array, mirror: bool | jax.Array = False) -> State:
+        """The snake at rest at the track's start, the target 1.6 m ahead of its head."""
+        phys = self.physics.init()
+        mirror = jnp.asarray(mirror, bool)
+        target_xy = self._target_xy(jnp.float32(0.0), mirror)
+        frame = self._frame(phys, target_xy)
+        a_head, a_body = self._angles(phys, target_xy, jnp.float32(0.0))
+        zero = jnp.zeros((), jnp.float32)
+        info = {
+            "rng": rng,
+            "mirror": mirror,
+            "target_s": zero,
+            "target_xy": target_xy,
+            "frame": frame,
+            "events": dvs.frame_difference(frame, frame, phys.time, threshold=self.event_threshold,
+                                           capacity=self.event_capacity)[0],
+            "overflow": jnp.zeros((), jnp.int32),
+            "body_angles": jnp.zeros((self.window,), jnp.float32),
+            "steps": jnp.zeros((), jnp.int32),
+        }
+        return State(pipeline_state=phys, obs=self._obs(phys, a_head, a_body), reward=zero, done=zero,
+                     metrics=self._metrics(phys, target_xy, a_head, a_body, info), info=info)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """One control step (see the module docstring)."""
+        action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
+        steer, head_offset = action[0] * self.max_steer, action[1] * self.max_head_offset
+        phys = state.pipeline_state
+        ctrl = joint_targets(self.gait, phys.time, steer, head_offset, self.compensate)
+        phys = self.physics.step(phys, ctrl)
+
+        info = dict(state.info)
+        mirror = info["mirror"]
+        track = self._oriented(mirror)
+        head_track = phys.head_pos[:2] - self.origin
+        target_s = T.advance(track, info["target_s"], head_track, self.target_speed, self.dt)
+        target_xy = self._target_xy(target_s, mirror)
+        a_head, a_body = self._angles(phys, target_xy, -head_offset)
+        frame = self._frame(phys, target_xy)
+        if self.camera_on:
+            events, overflow = dvs.frame_difference(info["frame"], frame, phys.time, threshold=self.event_threshold,
+                                                    capacity=self.event_capacity)
+        else:
+            events, overflow = info["events"], info["overflow"]
+        body_angles = info["body_angles"].at[info["steps"] % self.window].set(a_body)
+        info.update(target_s=target_s, target_xy=target_xy, frame=frame, events=events, overflow=overflow,
+                    body_angles=body_angles, steps=info["steps"] + 1)
+        lost = (jnp.abs(a_head) > LOST_HEAD_ANGLE) | (jnp.abs(jnp.mean(body_angles)) > LOST_BODY_ANGLE)
+        return state.replace(pipeline_state=phys, obs=self._obs(phys, a_head, a_body), reward=-jnp.abs(a_head),
+                             done=lost.astype(jnp.float32),
+                             metrics=self._metrics(phys, target_xy, a_head, a_body, info), info=info)
+
+    # ------------------------------------------------------------ parts
+
+    def _oriented(self, mirror) -> T.Track:
+        mirrored = T.mirror(self._track)
+        return jax.tree.map(lambda a, b: jnp.where(mirror, b, a), self._track, mirrored)
+
+    def _target_xy(self, s, mirror):
+        return T.point(self._oriented(mirror), s) + self.origin
+
+    def _angles(self, phys, target_xy, d_head):
+        return T.target_angles(phys.head_pos[:2], phys.head_mat[:2, 0], target_xy, d_head)
+
+    def _frame(self, phys, target_xy):
+        if not self.camera_on:
+            return jnp.zeros((1, 1), jnp.float32)
+        pipes = None
+        if self.pipes is not None:
+            pipes = self.pipes._replace(center=self.pipes.center + jnp.concatenate([self.origin, jnp.zeros(1)]))
+        return cam.frame(phys, cam.scene(target_xy, pipes))
+
+    def _obs(self, phys, a_head, a_body):
+        return jnp.concatenate([jnp.stack([a_head, a_body]), phys.qpos[self._joints]])
+
+    def _metrics(self, phys, target_xy, a_head, a_body, info):
+        return {
+            "a_head": a_head,
+            "a_body": a_body,
+            "distance": jnp.linalg.norm(target_xy - phys.head_pos[:2]),
+            "events": info["events"].count().astype(jnp.float32),
+            "overflow": info["overflow"].astype(jnp.float32),
+        }
+
+
+def rollout(env: SnakeEnv, policy, policy_state, steps: int, mirror=False, key=None):
+    """Run ``policy`` in ``env`` for ``steps`` control steps in one ``lax.scan``; jit and vmap it.
+
+    ``policy(policy_state, obs, state) -> (policy_state, action)``. Returns the
+    stacked per-step :class:`State` (without ``info["frame"]``, to keep the
+    record small) and the final state. The rollout continues after ``done``;
+    ``done`` marks the steps where the target counted as lost.
+    """
+    key = jax.random.PRNGKey(0) if key is None else key
+    state = env.reset(key, mirror)
+
+    def body(carry, _):
+        state, pstate = carry
+        pstate, action = policy(pstate, state.obs, state)
+        state = env.step(state, action)
+        record = state.replace(info={k: v for k, v in state.info.items() if k != "frame"})
+        return (state, pstate), record
+
+    (final, _), record = jax.lax.scan(body, (state, policy_state), None, length=steps)
+    return record, final
