@@ -44,7 +44,10 @@ is turned left; the head offset here is positive to the right, so
 
 The track is static (``track=``); ``reset(rng, mirror=...)`` mirrors it about
 the x axis, which is how the training track alternates direction each episode
-(:func:`robots.snake.tracks.training_mirror`). The tracks are laid out in the
+(:func:`robots.snake.tracks.training_mirror`). A ``step`` from a state at time
+0 starts the episode afresh (target at the start, no events, empty angle
+window), so Brax's ``AutoResetWrapper``, which puts back only the physics state
+and the observation, restarts the whole task. The tracks are laid out in the
 paper's frame (snake at (-5, 0)) and shifted so that the paper's start is the
 snake's head at rest. Nothing in the task is random: ``rng`` is accepted for
 Brax's interface and kept in ``info["rng"]``.
@@ -158,7 +161,7 @@ class SnakeEnv(Env):
                                            capacity=self.event_capacity)[0],
             "overflow": jnp.zeros((), jnp.int32),
             "body_angles": jnp.zeros((self.window,), jnp.float32),
-            "steps": jnp.zeros((), jnp.int32),
+            "control_steps": jnp.zeros((), jnp.int32),
         }
         return State(pipeline_state=phys, obs=self._obs(phys, a_head, a_body), reward=zero, done=zero,
                      metrics=self._metrics(phys, target_xy, a_head, a_body, info), info=info)
@@ -168,10 +171,15 @@ class SnakeEnv(Env):
         action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
         steer, head_offset = action[0] * self.max_steer, action[1] * self.max_head_offset
         phys = state.pipeline_state
+        # A state at time 0 starts an episode, also when Brax's AutoResetWrapper put back only the physics.
+        fresh = phys.time == 0.0
         ctrl = joint_targets(self.gait, phys.time, steer, head_offset, self.compensate)
         phys = self.physics.step(phys, ctrl)
 
         info = dict(state.info)
+        info["target_s"] = jnp.where(fresh, 0.0, info["target_s"])
+        info["body_angles"] = jnp.where(fresh, 0.0, info["body_angles"])
+        info["control_steps"] = jnp.where(fresh, 0, info["control_steps"])
         mirror = info["mirror"]
         track = self._oriented(mirror)
         head_track = phys.head_pos[:2] - self.origin
@@ -180,13 +188,14 @@ class SnakeEnv(Env):
         a_head, a_body = self._angles(phys, target_xy, -head_offset)
         frame = self._frame(phys, target_xy)
         if self.camera_on:
-            events, overflow = dvs.frame_difference(info["frame"], frame, phys.time, threshold=self.event_threshold,
+            previous = jnp.where(fresh, frame, info["frame"])
+            events, overflow = dvs.frame_difference(previous, frame, phys.time, threshold=self.event_threshold,
                                                     capacity=self.event_capacity)
         else:
             events, overflow = info["events"], info["overflow"]
-        body_angles = info["body_angles"].at[info["steps"] % self.window].set(a_body)
+        body_angles = info["body_angles"].at[info["control_steps"] % self.window].set(a_body)
         info.update(target_s=target_s, target_xy=target_xy, frame=frame, events=events, overflow=overflow,
-                    body_angles=body_angles, steps=info["steps"] + 1)
+                    body_angles=body_angles, control_steps=info["control_steps"] + 1)
         lost = (jnp.abs(a_head) > LOST_HEAD_ANGLE) | (jnp.abs(jnp.mean(body_angles)) > LOST_BODY_ANGLE)
         return state.replace(pipeline_state=phys, obs=self._obs(phys, a_head, a_body), reward=-jnp.abs(a_head),
                              done=lost.astype(jnp.float32),

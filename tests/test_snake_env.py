@@ -1,0 +1,136 @@
+"""The snake env: Brax's shapes and wrappers, jit and vmap, Eq. (12) at the start, the head camera and its events."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from brax.envs.base import Env, State
+
+from robots.snake import camera as cam
+from robots.snake import tracks as T
+from robots.snake.env import SnakeEnv
+from spikejax.errors import UserError
+from spikejax.vision import dvs
+from spikejax.vision import render as R
+
+
+@pytest.fixture(scope="module")
+def env():
+    return SnakeEnv("ladder", backend="mujoco", event_capacity=1024)
+
+
+@pytest.fixture(scope="module")
+def steps(env):
+    """Three snakes stepped 30 times with different constant actions, batched and one by one."""
+    actions = jnp.array([[0.0, 0.0], [1.0, 0.0], [-0.5, 0.8]])
+
+    def run(action):
+        def body(state, _):
+            state = env.step(state, action)
+            return state, (state.obs, state.reward, state.metrics["events"])
+
+        return jax.lax.scan(body, env.reset(jax.random.PRNGKey(0)), None, length=30)
+
+    batched = jax.jit(jax.vmap(run))(actions)
+    single = jax.jit(run)(actions[2])
+    return batched, single
+
+
+def test_brax_env_interface(env):
+    assert isinstance(env, Env)
+    state = env.reset(jax.random.PRNGKey(0))
+    assert isinstance(state, State)
+    assert state.obs.shape == (env.observation_size,) == (18,)
+    assert env.action_size == 2 and env.backend == "mujoco"
+    after = jax.jit(env.step)(state, jnp.zeros(env.action_size))
+    assert after.reward.shape == () and after.done.shape == ()
+    assert set(after.metrics) == set(state.metrics)  # Brax's wrappers need the same keys before and after
+    assert jax.tree.structure(after.info) == jax.tree.structure(state.info)
+    assert after.info["events"].capacity == 1024
+    assert float(after.pipeline_state.time) == pytest.approx(env.dt)
+
+
+def test_target_starts_straight_ahead(env):
+    state = env.reset(jax.random.PRNGKey(0))
+    head = np.asarray(state.pipeline_state.head_pos)
+    target = np.asarray(state.info["target_xy"])
+    assert np.linalg.norm(target - head[:2]) == pytest.approx(T.SPAWN_DISTANCE, abs=1e-5)
+    np.testing.assert_allclose(state.obs[:2], 0.0, atol=1e-5)  # a_head = a_body = 0 (Eq. 12)
+    # ... and the camera sees it in the middle column of its first frame.
+    col, row = R.project(cam.HEAD_CAMERA, head, state.pipeline_state.head_mat,
+                         jnp.array([*target, T.TARGET_RADIUS]))
+    assert col == pytest.approx(64.0, abs=0.5) and row < 64.0  # centre above the camera's height
+    dark = np.asarray(state.info["frame"]) < 0.2
+    cols = np.nonzero(dark.any(axis=0))[0]
+    assert abs(0.5 * (cols.min() + cols.max() + 1) - 64.0) <= 1.0
+
+
+def test_vmap_equals_single_runs_and_actions_matter(steps):
+    (final_b, (obs_b, reward_b, events_b)), (final_s, (obs_s, reward_s, events_s)) = steps
+    np.testing.assert_allclose(obs_b[2], obs_s, atol=1e-5)
+    np.testing.assert_allclose(events_b[2], events_s)
+    # Steering bends the lateral joints: different actions, different joint angles.
+    assert np.abs(obs_b[1, -1, 2:] - obs_b[0, -1, 2:]).max() > 0.05
+    assert np.all(np.asarray(reward_b) <= 0.0)
+    assert np.all(np.asarray(events_b)[:, 1:] > 0)  # the slithering head sees the scene move
+
+
+def test_moving_sphere_makes_events_on_its_edges_and_a_still_scene_none():
+    pos, rot = jnp.array([0.0, 0.0, 0.3]), jnp.eye(3)
+    before = R.render(cam.scene(jnp.array([1.6, 0.0])), pos, rot, cam.HEAD_CAMERA)
+    still = R.render(cam.scene(jnp.array([1.6, 0.0])), pos, rot, cam.HEAD_CAMERA)
+    moved = R.render(cam.scene(jnp.array([1.6, -0.03])), pos, rot, cam.HEAD_CAMERA)  # 3 cm to the right
+    kw = dict(threshold=0.05, capacity=4096)
+    none, overflow = dvs.frame_difference(before, still, 0.02, **kw)
+    assert int(none.count()) == 0 and int(overflow) == 0
+    events, overflow = dvs.frame_difference(before, moved, 0.02, **kw)
+    n = int(events.count())
+    assert n > 20 and int(overflow) == 0
+    x, y, p = (np.asarray(a)[:n] for a in (events.x, events.y, events.p))
+    # Every event lies within a pixel or two of the sphere's outline in one frame or the other.
+    f = cam.HEAD_CAMERA.focal
+    shift = f * 0.03 / 1.6
+    centre_col, centre_row = 64.0, 64.0 - f * 0.0 / 1.6
+    col, row = x + 0.5, y + 0.5
+    radius = f * 0.3 / math.sqrt(1.6**2 - 0.3**2)
+    r_before = np.hypot(col - centre_col, row - centre_row)
+    r_after = np.hypot(col - centre_col - shift, row - centre_row)
+    assert np.all(np.minimum(np.abs(r_before - radius), np.abs(r_after - radius)) < 2.0)
+    # The dark sphere moved right: its leading (right) edge darkens, its trailing (left) edge brightens.
+    assert np.all(p[col > centre_col + shift / 2] == -1) and np.all(p[col < centre_col - shift / 2] == 1)
+    # Both edges fire, the top and bottom (moving along themselves) hardly.
+    assert (col > centre_col).sum() > 5 and (col < centre_col).sum() > 5
+
+
+def test_mirror_flips_the_track(env):
+    plain = env.reset(jax.random.PRNGKey(0))
+    mirrored = env.reset(jax.random.PRNGKey(0), mirror=True)
+    s = jnp.float32(20.0)
+    a, b = env._target_xy(s, plain.info["mirror"]), env._target_xy(s, mirrored.info["mirror"])
+    np.testing.assert_allclose(b - env.origin, (a - env.origin) * jnp.array([1.0, -1.0]), atol=1e-5)
+
+
+def test_brax_training_wrappers_accept_the_env():
+    from brax.envs.wrappers.training import wrap
+
+    env = wrap(SnakeEnv("eight", camera=False), episode_length=4)
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(1), 2))
+    step = jax.jit(env.step)
+    for _ in range(5):
+        state = step(state, jnp.zeros((2, 2)))
+    assert state.obs.shape == (2, 18)
+    # After 4 steps the episode wrapper truncated and the auto-reset put the snakes back at the start.
+    assert float(state.info["steps"][0]) == 1.0
+    assert int(state.info["control_steps"][0]) == 1  # the task restarted too, not only the physics
+    assert float(state.info["target_s"][0]) <= 0.2 * 0.02 + 1e-6
+
+
+def test_bad_input_is_a_user_error():
+    with pytest.raises(UserError, match="unknown track"):
+        SnakeEnv("circle")
+    with pytest.raises(UserError, match="event_capacity"):
+        SnakeEnv(event_capacity=0)
+    with pytest.raises(UserError, match="physics backend"):
+        SnakeEnv(backend="bullet")
