@@ -379,18 +379,51 @@ def mjx_level_barriers():
 
 
 class _CRunner:
-    """Steps batches of snakes with ``mujoco.rollout`` on a persistent thread pool (host side)."""
+    """Steps batches of snakes through MuJoCo's C engine (host side).
+
+    A batch of at least ``nthread`` snakes goes to ``mujoco.rollout`` on a
+    persistent pool of ``nthread`` threads; a smaller one is stepped on the
+    calling thread with one ``MjData``, which costs less than a rollout's
+    set-up. Both set the full physics state, zero the solver's warm start and
+    hold the control for ``substeps`` calls of ``mj_step``, so they give the
+    same numbers.
+    """
 
     def __init__(self, model: mujoco.MjModel, substeps: int, nthread: int):
         self.model = model
         self.substeps = substeps
         self.nthread = nthread
+        self.spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self.nstate = mujoco.mj_stateSize(model, self.spec)
+        self.data = mujoco.MjData(model)
         self.datas = [mujoco.MjData(model) for _ in range(nthread)]
-        # A batch smaller than the pool runs on the calling thread.
-        self.serial = mj_rollout.Rollout(nthread=0)
-        self.pool = mj_rollout.Rollout(nthread=nthread) if nthread > 1 else self.serial
+        self.pool = mj_rollout.Rollout(nthread=nthread) if nthread > 1 else None
+        self.buffers = {}
         self.lock = threading.Lock()
         self.nq, self.nv, self.na = model.nq, model.nv, model.na
+
+    def _serial(self, state: np.ndarray, control: np.ndarray) -> np.ndarray:
+        model, data, spec = self.model, self.data, self.spec
+        out = np.empty_like(state)
+        for b in range(state.shape[0]):
+            mujoco.mj_setState(model, data, state[b], spec)
+            data.qacc_warmstart[:] = 0.0
+            data.ctrl[:] = control[b]
+            mujoco.mj_step(model, data, nstep=self.substeps)
+            mujoco.mj_getState(model, data, out[b], spec)
+        return out
+
+    def _threaded(self, state: np.ndarray, control: np.ndarray) -> np.ndarray:
+        n = state.shape[0]
+        if n not in self.buffers:
+            self.buffers[n] = ([self.model] * n, np.zeros((n, self.nv)),
+                               np.empty((n, self.substeps, self.nstate)), np.empty((n, self.substeps, 0)))
+        models, warmstart, out, sensordata = self.buffers[n]
+        control = np.ascontiguousarray(np.broadcast_to(control[:, None, :], (n, self.substeps, control.shape[1])))
+        self.pool.rollout(models, self.datas, state, control, skip_checks=True, nstep=self.substeps,
+                          initial_warmstart=warmstart, state=out, sensordata=sensordata,
+                          chunk_size=max(1, n // (4 * self.nthread)))
+        return out[:, -1, :]
 
     def __call__(self, qpos, qvel, act, time, ctrl):
         batch_shape = time.shape
@@ -401,16 +434,13 @@ class _CRunner:
             np.asarray(qvel, np.float64).reshape(n, self.nv),
             np.asarray(act, np.float64).reshape(n, self.na),
         ], axis=1)
-        control = np.asarray(ctrl, np.float64).reshape(n, 1, self.model.nu)
-        threaded = self.nthread > 1 and n >= self.nthread
-        pool, datas = (self.pool, self.datas) if threaded else (self.serial, self.datas[:1])
+        control = np.asarray(ctrl, np.float64).reshape(n, self.model.nu)
         with self.lock:
-            out, _ = pool.rollout(
-                [self.model] * n, datas, state, control,
-                nstep=self.substeps, initial_warmstart=np.zeros((n, self.nv)),
-                chunk_size=max(1, n // len(datas)),
-            )
-        final = out[:, -1, :].astype(np.float32)
+            if self.pool is not None and n >= self.nthread:
+                final = self._threaded(state, control)
+            else:
+                final = self._serial(state, control)
+        final = final.astype(np.float32)
         i = np.cumsum([1, self.nq, self.nv])
         return (final[:, i[0]:i[1]].reshape(*batch_shape, self.nq),
                 final[:, i[1]:i[2]].reshape(*batch_shape, self.nv),
