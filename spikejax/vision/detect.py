@@ -192,6 +192,9 @@ def run(det: Detector, params: DetectorParams, events: Events, times, state: Det
     return (state, *out)
 
 
+_run_jit = jax.jit(run, static_argnums=0)
+
+
 class Detections(NamedTuple):
     """What :func:`detect` found in a recording (host arrays, one row per slot).
 
@@ -284,7 +287,6 @@ def detect(
     ends = ((np.arange(n_slots * det.sub_slots) + 1) * part).reshape(n_slots, det.sub_slots)
     batch = jax.tree.map(lambda v: np.asarray(v).reshape(n_slots, det.sub_slots, -1), parts.events)
     chunk = max(1, min(chunk, n_slots))
-    step = jax.jit(run, static_argnums=0)
     state = _init(det)
     bodies, entries = [], []
     bar = _progress(n_slots, progress)
@@ -293,7 +295,7 @@ def detect(
         ev = jax.tree.map(lambda v: _pad(v[start:stop], chunk), batch)
         ts = _pad(ends[start:stop], chunk, edge=True)
         # Padded slots are empty and come last: the state after them is never used.
-        state, b, e = step(det, params, ev, ts, state)
+        state, b, e = _run_jit(det, params, ev, ts, state)
         bodies.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], b))
         entries.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], e))
         bar.update(stop - start)
