@@ -192,3 +192,10 @@ def test_slots_boundaries_are_exact_in_microseconds():
     np.testing.assert_array_equal(s.events.valid.sum(1), np.full(10, 3))
     s = io.to_slots(a, slot=0.03, capacity=9)
     np.testing.assert_array_equal(s.events.valid.sum(1), [9, 9, 9, 3])
+
+
+def test_npy_outside_the_assumed_dvs128_hints_at_the_size(tmp_path):
+    np.save(tmp_path / "big.npy", _tonic(20, size=(240, 180)))
+    with pytest.raises(UserError, match="outside the 128x128 sensor .*states no sensor size"):
+        io.read(tmp_path / "big.npy")
+    assert io.read(tmp_path / "big.npy", (240, 180))[1] == (240, 180)

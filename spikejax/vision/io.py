@@ -345,7 +345,10 @@ def read(path, sensor_size: tuple[int, int] | None = None) -> tuple[np.ndarray, 
     try:
         return normalize(array, size), _check_sensor_size(size)
     except UserError as err:
-        raise UserError(f"{path}: {err}") from None
+        hint = ""
+        if sensor_size is None and stated is None and "outside the" in str(err):
+            hint = " (the file states no sensor size, so the DVS128's was assumed; give the size)"
+        raise UserError(f"{path}: {err}{hint}") from None
 
 
 def _from_npz(npz) -> tuple[np.ndarray, tuple[int, int] | None]:
