@@ -140,6 +140,14 @@ def test_command_writes_table_csv_and_overlay(standing, tmp_path, capsys):
     assert (tmp_path / "out" / "overlay.png").stat().st_size > 1000
 
 
+def test_chunking_does_not_change_the_detections(standing):
+    _, events = standing
+    whole = detect.detect(events, (128, 128), slot=0.03, circles=False, chunk=64)
+    chunked = detect.detect(events, (128, 128), slot=0.03, circles=False, chunk=4)  # 10 slots: 4 + 4 + 2 (padded)
+    for a, b in zip(whole.bodies, chunked.bodies):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_overflow_is_counted_per_slot_and_reported(standing, tmp_path, capsys):
     _, events = standing
     found = detect.detect(events, (128, 128), slot=0.05, sub_slots=5, capacity=500, circles=False)

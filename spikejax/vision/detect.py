@@ -345,7 +345,7 @@ def main(args: argparse.Namespace) -> int:
     )
     rows = found.table()
     duration = (events["t"][-1] - events["t"][0]) * 1e-6
-    print(f"{args.file}: {len(events)} events, {size[0]}x{size[1]} sensor, {duration:.3f} s, "
+    print(f"{args.file}: {len(events)} event{'' if len(events) == 1 else 's'}, {size[0]}x{size[1]} sensor, {duration:.3f} s, "
           f"{len(found.overflow)} slots of {args.slot * 1e3:g} ms, mode {args.mode}")
     if found.overflow.sum():
         print(f"warning: {int(found.overflow.sum())} events did not fit (capacity {args.capacity} per "
