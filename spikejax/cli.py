@@ -19,6 +19,7 @@ REPRODUCTIONS = {
     "gait-choices": "robots.hexapod.reproduce:main_choices",
     "robobee": "robots.robobee.reproduce:main",
     "robobee-learning": "robots.robobee.reproduce:main_learning",
+    "snake-gait": "robots.snake.reproduce:main",
     "robobee-populations": "robots.robobee.reproduce:main_populations",
 }
 # ``spikejax detect TARGET FILE``: "module:function".
