@@ -227,3 +227,14 @@ def test_bad_grids_are_refused():
         hough.CircleGrid(r_min=0.0)
     with pytest.raises(UserError, match="method"):
         hough.circle_votes(hough.CircleGrid(width=8, height=8, n_r=2), _events([1], [1]), method="dense")
+
+
+def test_lying_pipe_circle_is_the_peak():
+    scene = scenes.lying_pipe(n_frames=2, height=64, width=64, centre=(30.0, 32.0), radius=12.0, speed=1.0, growth=1.0)
+    events, overflow = dvs.difference_events(scene.frames, scene.times, threshold=0.2, capacity=1024)
+    assert int(overflow[0]) == 0 and int(events.count()[0]) > 50
+    grid = hough.CircleGrid(width=64, height=64, n_r=24, r_min=4.0)
+    acc = np.asarray(hough.circle_votes(grid, jax.tree.map(lambda a: a[0], events), signed=False))
+    k, b, a = np.unravel_index(np.argmax(acc), acc.shape)
+    truth = scene.truth
+    assert abs(a - truth.a[1]) <= 1 and abs(b - truth.b[1]) <= 1 and abs(grid.radii()[k] - truth.r[1]) <= 1
