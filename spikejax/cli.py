@@ -1,7 +1,7 @@
-"""The ``spikejax`` command: ``reproduce``, ``sweep``, ``bench`` and ``info``.
+"""The ``spikejax`` command: ``reproduce``, ``sweep``, ``bench``, ``detect`` and ``info``.
 
-The CLI sits on top of the library and the robots: reproductions and benchmarks
-are named here by import path and imported only when asked for, so that
+The CLI sits on top of the library and the robots: reproductions, benchmarks
+and detectors are named here by import path and imported only when asked for, so that
 ``spikejax`` itself never imports ``robots``.
 """
 
