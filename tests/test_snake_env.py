@@ -134,3 +134,19 @@ def test_bad_input_is_a_user_error():
         SnakeEnv(event_capacity=0)
     with pytest.raises(UserError, match="physics backend"):
         SnakeEnv(backend="bullet")
+
+
+def test_steering_controller_by_hand():
+    from robots.snake import steering
+
+    obs = jnp.zeros(18).at[1].set(0.2)  # target 0.2 rad to the right of the body
+    state, action = steering.act(steering.SteeringParams(gain=1.0, head_gain=2.0, tau=0.0), steering.init(), obs, 0.02)
+    np.testing.assert_allclose(action, [0.2, 0.4], rtol=1e-6)  # unfiltered: proportional, both turn right
+    params = steering.SteeringParams(gain=10.0, head_gain=0.0, tau=1.0)
+    state, action = steering.act(params, steering.init(), obs, 0.02)
+    smoothed = (1 - math.exp(-0.02)) * 0.2
+    assert float(state.angle) == pytest.approx(smoothed, rel=1e-5)
+    np.testing.assert_allclose(action, [10 * smoothed, 0.0], rtol=1e-5)
+    for _ in range(300):
+        state, action = steering.act(params, state, obs, 0.02)
+    np.testing.assert_allclose(action, [1.0, 0.0])  # clipped to the action range

@@ -116,7 +116,7 @@ def _plot_trajectories(path: Path, cases, com) -> None:
     for k, (steer, compensate) in enumerate(cases):
         style = "-" if compensate else "k--"
         ax.plot(com[k, :, 0], com[k, :, 1], style, label=f"C_o = {steer:+.2f}" + ("" if compensate else ", no comp."))
-    ax.set_aspect("equal")
+    ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("Centre of mass, top-down (start at the origin, heading +x)")
@@ -247,8 +247,8 @@ def _plot_tracks(path: Path, results) -> None:
         if i == 0:
             ax.legend(fontsize=7)
         ax = fig.add_subplot(2, len(names), len(names) + i + 1)
-        ax.plot(r["time"], np.degrees(r["a_head"]), lw=0.5, label="head")
-        ax.plot(r["time"], np.degrees(r["a_body"]), lw=0.5, label="body")
+        ax.plot(r["time"], np.degrees(r["a_body"]), lw=0.4, color="tab:gray", label="body")
+        ax.plot(r["time"], np.degrees(r["a_head"]), lw=0.4, color="tab:blue", label="head")
         lost = np.nonzero(r["done"] > 0)[0]
         if len(lost):
             ax.axvline(r["time"][lost[0]], color="r", ls="--")
