@@ -31,6 +31,7 @@ BENCHMARKS = {
     "robobee-network": "robots.robobee.bench_network:main_network",
     "robobee": "robots.robobee.bench:main",
     "hough": "spikejax.vision.bench_hough:main",
+    "snake": "robots.snake.bench:main",
 }
 
 
