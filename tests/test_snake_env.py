@@ -150,3 +150,21 @@ def test_steering_controller_by_hand():
     for _ in range(300):
         state, action = steering.act(params, state, obs, 0.02)
     np.testing.assert_allclose(action, [1.0, 0.0])  # clipped to the action range
+
+
+@pytest.mark.slow
+def test_mjx_backend_gives_the_same_observations_and_events():
+    def run(env):
+        def one(key):
+            def body(state, action):
+                state = env.step(state, action)
+                return state, (state.obs, state.metrics["events"])
+
+            return jax.lax.scan(body, env.reset(key), jnp.tile(jnp.array([[0.5, -0.3]]), (20, 1)))[1]
+
+        return jax.device_get(jax.jit(jax.vmap(one))(jax.random.split(jax.random.PRNGKey(0), 2)))
+
+    obs_c, events_c = run(SnakeEnv("eight", backend="mujoco"))
+    obs_x, events_x = run(SnakeEnv("eight", backend="mjx"))
+    np.testing.assert_allclose(obs_x, obs_c, atol=1e-5)  # 20 control steps, float32 on both sides
+    np.testing.assert_allclose(events_x, events_c, atol=2)
