@@ -48,7 +48,7 @@ from spikejax.errors import UserError
 STEERS = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)  # C_o, rad
 GAIT_PERIODS = 8  # gait periods per steering rollout
 STRIP_STEPS = 300  # control steps of the camera run (6 s)
-TRACK_SECONDS = 180.0  # the steering baseline's time on each track
+TRACK_SECONDS = 400.0  # the steering baseline's time on each track: at 0.1 m/s, both lobes of the 8
 GAIT_HEADER = ["C_o_rad", "compensation", "forward_speed_m_s", "turning_rate_deg_s", "head_yaw_amplitude_deg"]
 TRACK_HEADER = ["track", "seconds", "mean_abs_head_angle_deg", "mean_abs_body_angle_deg", "lost_at_s",
                 "mean_distance_m"]
