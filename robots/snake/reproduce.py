@@ -168,6 +168,7 @@ def _plot_strip(path: Path, record, panels: int = 6) -> None:
 
 def _animate(path: Path, env: SnakeEnv, record, frames: int = 40) -> None:
     from matplotlib.animation import PillowWriter
+    from matplotlib.patches import Circle
 
     images, events, qpos, target, _ = record
     bodies = [env.physics.mj_model.body(f"module{k}").id for k in range(17)]
@@ -182,9 +183,8 @@ def _animate(path: Path, env: SnakeEnv, record, frames: int = 40) -> None:
             eye.cla()
             top.plot(xpos[k, :, 0], xpos[k, :, 1], "o-", color="tab:orange", ms=3)
             top.plot(xpos[k, 0, 0], xpos[k, 0, 1], "ks", ms=5)
-            top.add_patch(__import__("matplotlib.patches", fromlist=["Circle"]).Circle(target[k], T.TARGET_RADIUS,
-                                                                                      color="tab:green"))
-            centre = xpos[k].mean(axis=0)
+            top.add_patch(Circle(target[k], T.TARGET_RADIUS, color="tab:green"))
+            centre = 0.5 * (xpos[k].mean(axis=0)[:2] + target[k])
             top.set_xlim(centre[0] - 2.0, centre[0] + 2.0)
             top.set_ylim(centre[1] - 2.0, centre[1] + 2.0)
             top.set_aspect("equal")
