@@ -106,7 +106,7 @@ def _speed_and_turn(phys, steers, seconds=25.0):
 
 
 def test_tuned_settings_keep_speed_and_turning_within_5_percent():
-    """Sec. 5 of the issue: the tuned model (pairs, 6/6 iterations, 4 ms) against MuJoCo C's default settings."""
+    """Sec. 5 of the issue: the tuned model (pairs, CG 20/20 iterations, 4 ms) against MuJoCo C's default settings."""
     steers = [0.0, 0.1, -0.1]
     speed_d, turn_d = _speed_and_turn(make_physics("mujoco", settings="default"), steers)
     speed_t, turn_t = _speed_and_turn(make_physics("mujoco", settings="tuned"), steers)
@@ -140,20 +140,27 @@ def test_mjx_compiles_in_seconds_and_agrees_with_mujoco_c():
     """A regression guard for the XLA fusion trap, and the two backends' agreement.
 
     The 17-module MJX step, compile included, must finish well within the
-    timeout (it took minutes or forever without `mjx_level_barriers`; about
-    20-40 s here on a loaded 2-core CPU). Over 0.4 s (20 control steps) of the
-    steered gait, float32 MJX and float64 MuJoCo C agree on the head camera's
-    and the centre of mass's positions within 2 mm.
+    timeout (it took minutes or forever without `mjx_level_barriers`; 10-40 s
+    here on a 2-core CPU, depending on load). Stated tolerance, for 5 s (250
+    control steps) of the steered gait (float32 MJX against float64 MuJoCo C,
+    both with CG capped at 20 iterations, so their contact solutions differ a
+    little and the difference accumulates): over the first 0.4 s the head
+    camera within 1 cm and the centre of mass within 3 mm; over 5 s the centre
+    of mass within 2 cm (of about 0.45 m travelled) and the distance it
+    travels in the second gait period within 5 %.
     """
-    proc = subprocess.run([sys.executable, "-c", _MJX_SCRIPT, "20"], cwd=ROOT, capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-c", _MJX_SCRIPT, "250"], cwd=ROOT, capture_output=True, text=True,
                           timeout=150)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
-    mjx, c = out["mjx"], out["mujoco"]
-    np.testing.assert_allclose(mjx["head"], c["head"], atol=2e-3)
-    np.testing.assert_allclose(mjx["com"], c["com"], atol=2e-3)
-    # The snake moved: agreement is not two resting snakes.
-    assert np.linalg.norm(np.subtract(c["head"][-1], c["head"][0])) > 5e-3
+    head = {k: np.asarray(v["head"]) for k, v in out.items()}
+    com = {k: np.asarray(v["com"]) for k, v in out.items()}
+    np.testing.assert_allclose(head["mjx"][:20], head["mujoco"][:20], atol=1e-2)
+    np.testing.assert_allclose(com["mjx"][:20], com["mujoco"][:20], atol=3e-3)
+    np.testing.assert_allclose(com["mjx"], com["mujoco"], atol=2e-2)
+    travel = {k: np.linalg.norm(c[-1, :2] - c[124, :2]) for k, c in com.items()}
+    assert travel["mjx"] == pytest.approx(travel["mujoco"], rel=0.05)
+    assert travel["mujoco"] > 0.1  # the snake moved: agreement is not two resting snakes
 
 
 @pytest.mark.parametrize("kwargs, match", [
@@ -166,3 +173,25 @@ def test_mjx_compiles_in_seconds_and_agrees_with_mujoco_c():
 def test_bad_arguments_are_user_errors(kwargs, match):
     with pytest.raises(UserError, match=match):
         make_physics(**kwargs)
+
+
+def test_bench_quick_writes_consistent_table(tmp_path):
+    import argparse
+    import csv
+
+    from robots.snake import bench
+
+    bench.main(argparse.Namespace(out=str(tmp_path), trials=None, quick=True, no_progress=True))
+    rows = list(csv.DictReader(open(tmp_path / "snake.csv")))
+    assert {r["impl"] for r in rows} == {"MuJoCo C physics only", "mujoco backend closed loop"}
+    assert (tmp_path / "snake.png").stat().st_size > 0
+    substeps = make_physics("mujoco").substeps
+    for r in rows:
+        rate, batch = float(r["env_steps_per_s"]), int(r["batch"])
+        assert rate > 0
+        assert float(r["physics_steps_per_s"]) == pytest.approx(rate * substeps)
+        assert float(r["sim_s_per_wall_s"]) == pytest.approx(rate * 0.02)
+        assert float(r["episode_wall_s"]) == pytest.approx(bench.EPISODE_STEPS * batch / rate)
+        assert float(r["run_s"]) == pytest.approx(batch * int(r["control_steps"]) / rate)
+    c_row = next(r for r in rows if r["impl"].startswith("MuJoCo C"))
+    assert float(c_row["vs_c_physics"]) == pytest.approx(1.0)

@@ -61,7 +61,7 @@ __all__ = [
 ]
 
 BATCHES = (1, 4, 16, 64, 256, 512, 1024)
-QUICK_BATCHES = (1, 4)
+QUICK_BATCHES = (2,)
 EPISODE_STEPS = 151_093  # control steps of the paper's first training episode
 EPISODE_SECONDS = 3021.86  # its simulated time, s
 # Physics steps (batch x control steps x substeps) a timed run aims at.
@@ -195,7 +195,7 @@ def _plot(rows: list[dict], path: Path) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``spikejax bench snake [--trials N] [--out DIR]``; ``args.quick`` (if set) times batches 1 and 4 without MJX.
+    """``spikejax bench snake [--trials N] [--out DIR]``; ``args.quick`` (if set) times a batch of 2 without MJX.
 
     ``--trials`` caps the batch sizes timed (default: up to 1024).
     """
