@@ -23,8 +23,7 @@ def _recording(frames, times, threshold=0.1):
     """Frame-difference events of a scene as a canonical structured array (t in us)."""
     events, overflow = dvs.difference_events(frames, times, threshold=threshold, capacity=4096)
     assert int(overflow.sum()) == 0
-    rows = [io.to_structured(jax.tree.map(lambda v: v[k], events)) for k in range(events.x.shape[0])]
-    return np.concatenate(rows)
+    return io.to_structured(events)
 
 
 def _slot_truth(values, fps, slot, n_slots):

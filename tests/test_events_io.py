@@ -1,5 +1,7 @@
 """Event conversion: structured arrays, .npy, .npz and AEDAT4 in and out, and bad input."""
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -44,6 +46,17 @@ def test_structured_round_trip_restores_stamps_exactly():
     back = io.to_structured(ev, t0=int(a["t"][0]), polarity="bool")
     for name in ("x", "y", "t", "p"):
         np.testing.assert_array_equal(back[name], a[name])
+
+
+def test_slots_of_a_stream_read_row_by_row():
+    a = _tonic(200)
+    rows = [io.from_structured(a[k * 50:(k + 1) * 50], (128, 96), capacity=64, t0=int(a["t"][0]))[0] for k in range(4)]
+    slots = jax.tree.map(lambda *v: jnp.stack(v), *rows)  # leaves (4, 64), the last 14 slots of each row empty
+    back = io.to_structured(slots, t0=int(a["t"][0]), polarity="bool")
+    for name in ("x", "y", "t", "p"):
+        np.testing.assert_array_equal(back[name], a[name])
+    with pytest.raises(UserError, match="one stream"):
+        io.to_structured(jax.tree.map(lambda v: v[None], slots))
 
 
 def test_capacity_overflow_is_counted_and_first_events_kept(tmp_path):

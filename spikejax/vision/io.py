@@ -265,7 +265,9 @@ def to_structured(events: Events, *, t0: int = 0, polarity: str = "signed") -> n
     """The valid events of an :class:`Events` as a structured array.
 
     Args:
-        events: one stream (leaves of shape ``(capacity,)``).
+        events: one stream (leaves of shape ``(capacity,)``), or a sequence of
+            slots of one stream (leaves ``(n_slots, capacity)``, e.g. from
+            :func:`spikejax.vision.dvs.difference_events`), read row by row.
         t0: absolute time (us) of ``t = 0``; added back to the stamps.
         polarity: ``"signed"`` for ``-1/+1`` (:data:`EVENT_DTYPE`) or ``"bool"``
             for Tonic's ``False/True``.
@@ -274,17 +276,22 @@ def to_structured(events: Events, *, t0: int = 0, polarity: str = "signed") -> n
         Array with fields ``x``, ``y``, ``t`` (int64 us, rounded to the
         nearest microsecond) and ``p``, in slot order.
     """
-    if np.ndim(events.x) != 1:
-        raise UserError(f"to_structured takes one stream; got event arrays of shape {np.shape(events.x)}")
+    if np.ndim(events.x) not in (1, 2):
+        raise UserError(f"to_structured takes one stream, as (capacity,) or (slots, capacity) arrays; "
+                        f"got event arrays of shape {np.shape(events.x)}")
     if polarity not in ("signed", "bool"):
         raise UserError(f"polarity must be 'signed' or 'bool', not {polarity!r}")
-    keep = np.asarray(events.valid, bool)
+    keep = np.asarray(events.valid, bool).reshape(-1)
+
+    def column(values, dtype=None):
+        return np.asarray(values, dtype).reshape(-1)[keep]
+
     dtype = EVENT_DTYPE if polarity == "signed" else np.dtype([*EVENT_DTYPE.descr[:3], ("p", "?")])
     out = np.empty(int(keep.sum()), dtype)
-    out["x"] = np.asarray(events.x)[keep]
-    out["y"] = np.asarray(events.y)[keep]
-    out["t"] = np.rint(np.asarray(events.t, np.float64)[keep] * 1e6).astype(np.int64) + int(t0)
-    p = np.asarray(events.p)[keep]
+    out["x"] = column(events.x)
+    out["y"] = column(events.y)
+    out["t"] = np.rint(column(events.t, np.float64) * 1e6).astype(np.int64) + int(t0)
+    p = column(events.p)
     out["p"] = p if polarity == "signed" else p > 0
     return out
 
@@ -424,8 +431,8 @@ def save(path, events, sensor_size: tuple[int, int] = DVS128, *, t0: int = 0) ->
 
     Args:
         path: destination file.
-        events: an :class:`Events` (one stream; ``t0`` added back to its
-            stamps) or a structured array with fields ``x``, ``y``, ``t``, ``p``.
+        events: an :class:`Events` (one stream, as :func:`to_structured` takes
+            it; ``t0`` added back to its stamps) or a structured array with fields ``x``, ``y``, ``t``, ``p``.
         sensor_size: ``(width, height)``, stored in ``.npz`` and ``.aedat4``.
         t0: absolute time (us) of ``t = 0`` of an :class:`Events`.
 
