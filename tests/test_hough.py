@@ -220,6 +220,23 @@ def test_modes_vmap_over_streams_like_single_streams():
         np.testing.assert_array_equal(np.asarray(together_sync[i]), np.asarray(hough.sync_run(params, grid, one, times)[1]))
 
 
+def test_async_nested_vmap_and_batched_params_like_single_streams():
+    # Nested vmaps fold into one batch of streams; v_th differs per stream.
+    grid = hough.LineGrid(width=10, height=8, n_theta=12, n_rho=16)
+    rng = np.random.default_rng(6)
+    streams = [_random_events(rng, 40, 10, 8) for _ in range(6)]
+    batch = jax.tree.map(lambda *a: jnp.stack(a).reshape(2, 3, 4, 10), *streams)
+    v_th = jnp.asarray([[2.5, 3.5, 1.5], [2.5, 2.0, 3.0]], jnp.float32)
+    run = lambda e, v: hough.async_run(hough.hough_params(v, 1.0), grid, e)
+    together = jax.jit(jax.vmap(jax.vmap(run)))(batch, v_th)
+    assert np.abs(np.asarray(together[1])).sum() > 0
+    for i in range(2):
+        for j in range(3):
+            one = run(jax.tree.map(lambda a: a[i, j], batch), v_th[i, j])
+            for a, b in zip(jax.tree.leaves(together), jax.tree.leaves(one)):
+                np.testing.assert_array_equal(np.asarray(a)[i, j], np.asarray(b))
+
+
 def test_bad_grids_are_refused():
     with pytest.raises(UserError, match="n_theta"):
         hough.LineGrid(n_theta=0)

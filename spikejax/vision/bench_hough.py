@@ -20,31 +20,38 @@ inhibition -- in both modes, ``jax.jit(jax.vmap(...))`` over a batch of streams
 Compile time (first call) is reported apart from run time (the median of
 repeated calls after it). Frames/s and events/s count every stream of the batch.
 
-Formulations measured (numbers in ``docs/BENCHMARKS.md``), and why these won:
+Formulations measured (ratios in ``docs/ARCHITECTURE.md``, "Hough formulations
+(measured)"; ``benchmarks/hough_formulations.py`` measures them side by side),
+and why these won:
 
-* Line votes: a scatter-add of the ``n_theta`` cells of every event, read from a
-  static table of the rho bin of each (pixel, angle) (:func:`hough.line_table`).
-  It beat, on this 2-core CPU, computing rho on the fly (same speed; the
+* Line votes: scatter-adds of the ``n_theta`` cells of every event, read from a
+  static table of the rho bin of each (pixel, angle) (:func:`hough.line_table`),
+  gathered as uint16, summed in int32, 576 events at a time (the gathered cells
+  stay in the L2 cache), and under ``vmap`` on a CPU one stream after another,
+  each into its own accumulator (a custom batching rule): the scatter then runs
+  at about 1 ns a vote. A flat scatter of all streams into one accumulator
+  (the stream index in the cell index) is 2-3x slower, as its accumulators do
+  not stay in the cache. Also beaten: computing rho on the fly (same speed; the
   scatter dominates), dense matmuls of the event image with the static
   pixel -> cell incidence matrix (16384 x 32400, 0.55 % full: 5-7x slower even in
-  bfloat16), one-hot matmuls over events (20x slower) and segment sums or
-  gathers over per-cell pixel lists with the batch innermost (3-10x slower:
-  XLA's CPU gather and scatter of rows are slow).
+  bfloat16), one-hot matmuls over events (20x slower), segment sums or gathers
+  over per-cell pixel lists (3-10x slower), theta blocks (slower: strided
+  gathers) and int16 counts (no faster).
+* Lateral inhibition (sync): the 3 x 3 (x 3) dilation as ORs of shifted slices
+  of the padded spike mask; ``lax.reduce_window`` is a generic loop on a CPU.
 * Circle votes: the event image convolved with the 64 ring kernels by FFT
   (one forward, 64 inverse real FFTs of 192 x 192, the smallest size without
   wrap-around), independent of the number of events; scattering every event's
   ~13,000 ring cells is 100x more work.
-* Async: a ``lax.scan`` over events per stream; each event gathers the
-  ``(v, t_last)`` of its 180 cells, decays them lazily and writes them back by a
-  scatter-add of the change (XLA updates in place after a gather for an add,
-  but copies for a set); firing and inhibition run in a while loop of at most
-  one trip, taken only when a cell crosses threshold. Under ``vmap`` on a CPU
-  the streams run one after another (``lax.map`` through a custom batching
-  rule): a vmapped event loop makes XLA copy the whole batched state on every
-  event, 15x slower.
-* Batched scatters (line votes) are folded into one flat scatter with the
-  stream index in the cell index (a custom batching rule): 1.5x faster than
-  XLA's scatter with a batch dimension.
+* Async: one ``lax.scan`` over event positions for the whole batch; each step
+  gathers the ``(v, t_last)`` of the 180 cells of event ``i`` of every stream
+  from a flat state of all streams' grids, decays them lazily and writes them
+  back by one scatter-add of the change (XLA updates in place after a gather
+  for an add, but copies for a set); inhibition runs in a ``lax.cond`` only on
+  steps where some stream fired, its fired cells packed to the front and
+  visited 8 per stream at a time. Running the streams one after another
+  (``lax.map``, one event a step, as before) is 1.4-1.7x slower: each step is
+  a dozen small XLA operations, about 4 us an event whatever their size.
 """
 
 from __future__ import annotations

@@ -45,16 +45,18 @@ slot cancel before they can fire, the decay within a slot is ignored, and the
 inhibition of a spike acts at the end of the slot rather than on the later
 events of the slot. With at most one event per slot they agree exactly.
 
-How it is computed (each choice measured against the alternatives, see
-:mod:`spikejax.vision.bench_hough`): line votes are one scatter-add of each
-event's ``n_theta`` cells, read from a static (pixel, angle) -> cell table
-(:func:`line_table`); circle votes are the event image convolved with the ring
-kernels by FFT; the asynchronous loop gathers the ``(v, t_last)`` of the cells an
-event touches and scatter-adds the change, with firing and inhibition in a
-loop taken only when some cell crosses the threshold. Under ``vmap``, the line
-scatters of all streams are folded into one flat scatter, and on a CPU the
-asynchronous streams run one after another (custom batching rules), both
-faster there than XLA's batched scatters.
+How it is computed (each choice measured against the alternatives on a 2-core
+CPU, see :mod:`spikejax.vision.bench_hough` and ``docs/ARCHITECTURE.md``): line
+votes are scatter-adds of each event's ``n_theta`` cells, read from a static
+(pixel, angle) -> cell table (:func:`line_table`, gathered as uint16) into an
+int32 accumulator, a few hundred events at a time so that the gathered cells
+stay in the L2 cache; under ``vmap`` on a CPU the streams are voted one after
+another, each into its own cache-resident accumulator (a custom batching
+rule). Circle votes are the event image convolved with the ring kernels by
+FFT. The asynchronous loop steps over event positions with every stream of the
+batch at once: one gather of the ``(v, t_last)`` of the cells the events touch
+and one scatter-add of the change, with inhibition (the fired cells packed to
+the front) only on steps where some stream fired.
 """
 
 from __future__ import annotations
@@ -319,27 +321,39 @@ def ring_offsets(grid: CircleGrid) -> np.ndarray:
 # --- votes ---------------------------------------------------------------------
 
 
+def _one_stream_at_a_time(fn):
+    """``fn`` (written for one stream), batched under ``vmap`` by ``lax.map`` on a CPU.
+
+    A scatter into a per-stream accumulator stays in the cache, and XLA's CPU
+    backend runs it as one tight loop; a batched (or flattened) scatter touches
+    every stream's accumulator and is 2-3 times slower there. Other backends
+    ``vmap``. Arguments are positional arrays (``jax.custom_batching``).
+    """
+    batched = jax.custom_batching.custom_vmap(fn)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        args = jax.tree.map(
+            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, tuple(in_batched)
+        )
+        if jax.default_backend() == "cpu":
+            out = jax.lax.map(lambda a: batched(*a), args)
+        else:
+            out = jax.vmap(fn)(*args)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return batched
+
+
+def _scatter_add(length: int, index, weight):
+    """``zeros(length).at[index].add(weight)``, with ``0 <= index < length``."""
+    return jnp.zeros((length,), weight.dtype).at[index].add(weight, mode="promise_in_bounds")
+
+
 @functools.cache
 def _histogram(length: int):
-    """``(index, weight) -> zeros(length).at[index].add(weight)``, with ``0 <= index < length``."""
-
-    @jax.custom_batching.custom_vmap
-    def histogram(index, weight):
-        return jnp.zeros((length,), jnp.float32).at[index].add(weight, mode="promise_in_bounds")
-
-    @histogram.def_vmap
-    def _rule(axis_size, in_batched, index, weight):
-        # One scatter into a flat (batch * length) histogram: 1.5 times faster
-        # on a CPU than XLA's scatter with a batch dimension.
-        index = index if in_batched[0] else jnp.broadcast_to(index, (axis_size,) + index.shape)
-        weight = weight if in_batched[1] else jnp.broadcast_to(weight, (axis_size,) + weight.shape)
-        flat = index + (jnp.arange(axis_size, dtype=index.dtype) * length)[:, None]
-        out = jnp.zeros((axis_size * length,), jnp.float32).at[flat.reshape(-1)].add(
-            weight.reshape(-1), mode="promise_in_bounds"
-        )
-        return out.reshape(axis_size, length), True
-
-    return histogram
+    """:func:`_scatter_add` of one stream, batched by :func:`_one_stream_at_a_time`."""
+    return _one_stream_at_a_time(lambda index, weight: _scatter_add(length, index, weight))
 
 
 def _weights(events: Events, signed: bool) -> jax.Array:
@@ -364,12 +378,46 @@ def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Ar
     accumulator of the events at the nonzero pixels of a binary image is
     ``skimage.transform.hough_line(image, grid.skimage_thetas())[0].T``.
     """
-    table = jnp.asarray(line_table(grid))
-    pixel, ok = _pixel(grid, events)
-    w = jnp.where(ok, _weights(events, signed), 0.0)
-    cells = table[pixel]  # (capacity, n_theta)
-    acc = _histogram(grid.size + 1)(cells.reshape(-1), jnp.repeat(w, grid.n_theta))
-    return acc[: grid.size].reshape(grid.shape)
+    return _line_accumulator(grid, signed)(events)
+
+
+@functools.cache
+def _compact_table(grid: LineGrid) -> np.ndarray:
+    """:func:`line_table` as uint16 where the cells fit: half the bytes to gather per event."""
+    table = line_table(grid)
+    return table.astype(np.uint16) if grid.size < 2**16 else table
+
+
+@functools.cache
+def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576):
+    """:func:`line_votes` for one stream: scatter-adds of the events' table rows.
+
+    The events go ``chunk`` at a time (a ``lax.scan``), so that the cell indices
+    and weights of a chunk (``chunk * n_theta`` of each) stay in the CPU's L2
+    cache between being gathered and being scattered. Counts are summed in
+    int32 (exact, as float32 sums of +-1 are); the table is gathered as uint16.
+    Streams run one at a time on a CPU (:func:`_one_stream_at_a_time`).
+    """
+    table = _compact_table(grid)
+
+    def accumulate(events):
+        pixel, ok = _pixel(grid, events)
+        w = jnp.where(ok, events.p if signed else 1, 0).astype(jnp.int32)
+        n_chunks = -(-pixel.shape[0] // chunk)
+        length = -(-pixel.shape[0] // n_chunks)
+        pad = n_chunks * length - pixel.shape[0]  # padding events have weight 0
+        pixel = jnp.pad(pixel, (0, pad)).astype(jnp.uint32).reshape(n_chunks, length)
+        w = jnp.pad(w, (0, pad)).reshape(n_chunks, length)
+
+        def add(acc, part):
+            pixel, w = part
+            cells = jnp.asarray(table).at[pixel].get(mode="promise_in_bounds")
+            return acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta), mode="promise_in_bounds"), None
+
+        acc, _ = jax.lax.scan(add, jnp.zeros((grid.size + 1,), jnp.int32), (pixel, w))
+        return acc[: grid.size].reshape(grid.shape).astype(jnp.float32)
+
+    return _one_stream_at_a_time(accumulate)
 
 
 def event_image(grid, events: Events, *, signed: bool = True) -> jax.Array:
@@ -465,9 +513,17 @@ def _decay(v, amount):
 
 
 def _neighbourhood(fired: jax.Array) -> jax.Array:
-    """Cells within one step (3 x 3, or 3 x 3 x 3) of a fired cell; the grid does not wrap."""
-    ones = (3,) * fired.ndim
-    return jax.lax.reduce_window(fired, False, jax.lax.bitwise_or, ones, (1,) * fired.ndim, "SAME")
+    """Cells within one step (3 x 3, or 3 x 3 x 3) of a fired cell; the grid does not wrap.
+
+    A box dilation, one axis at a time, as the OR of three shifted slices of the
+    padded mask (XLA's CPU ``reduce_window`` is a generic loop, twice as slow).
+    """
+    for axis in range(fired.ndim):
+        n = fired.shape[axis]
+        padded = jnp.pad(fired, [(1, 1) if a == axis else (0, 0) for a in range(fired.ndim)])
+        shifted = [jax.lax.slice_in_dim(padded, i, i + n, axis=axis) for i in range(3)]
+        fired = shifted[0] | shifted[1] | shifted[2]
+    return fired
 
 
 def sync_step(
@@ -518,110 +574,133 @@ def sync_run(
     return jax.lax.scan(body, state, (events, times))
 
 
-def _inhibit(state, out, fired, cells, signs, neighbours, chunk: int = 16):
-    """Reset the neighbourhoods of the fired cells and record their spikes.
+def _line_wiring(grid: LineGrid):
+    """The cells an event votes for, and the neighbourhoods of those cells, on a line grid.
 
-    ``neighbours(i)`` gives the flat indices (``(m,)``, the dummy cell where
-    masked) of the neighbourhood of the ``i``-th touched cell. The fired cells
-    are visited ``chunk`` at a time in a while loop.
+    Returns ``(cells, neighbours)``: ``cells(x, y, valid)`` gives, for events of
+    shape ``(B,)``, the ``(B, n_theta)`` cells (one per angle, ``grid.size`` where
+    masked) and whether each is on the grid; ``neighbours(cells, which, x, y)``
+    gives the ``(B, K, 9)`` 3 x 3 neighbourhoods (``grid.size`` outside the grid)
+    of the cells at positions ``which`` ``(B, K)`` of ``cells``.
     """
-    n = fired.shape[0]
-    count = jnp.sum(fired)
-    dummy = state.shape[0] - 1
+    table = jnp.asarray(_compact_table(grid))
+    dk, dj = (a.reshape(-1) for a in np.meshgrid(np.arange(-1, 2), np.arange(-1, 2), indexing="ij"))
 
-    def body(carry):
-        i, state, out = carry
-        order = jnp.nonzero(fired, size=n, fill_value=n - 1)[0]
-        slots = i * chunk + jnp.arange(chunk)
-        live = slots < count
-        which = order[jnp.minimum(slots, n - 1)]
-        idx = jax.vmap(neighbours)(which)
-        idx = jnp.where(live[:, None], idx, dummy).reshape(-1)
-        state = state.at[idx, 0].set(0.0, mode="promise_in_bounds")
-        spiked = jnp.where(live, cells[which], dummy)
-        out = out.at[spiked].set(signs[which], mode="promise_in_bounds")
-        return i + 1, state, out
+    def cells(x, y, valid):
+        on = valid & (x >= 0) & (x < grid.width) & (y >= 0) & (y < grid.height)
+        pixel = jnp.where(on, y * grid.width + x, 0).astype(jnp.uint32)
+        flat = table.at[pixel].get(mode="promise_in_bounds").astype(jnp.int32)
+        ok = on[:, None] & (flat < grid.size)
+        return jnp.where(ok, flat, grid.size), ok
 
-    _, state, out = jax.lax.while_loop(lambda c: c[0] * chunk < count, body, (0, state, out))
-    return state, out
+    def neighbours(flat, which, x, y):
+        rho = jnp.take_along_axis(flat, which, axis=1) - which * grid.n_rho
+        nk, nj = which[..., None] + dk, rho[..., None] + dj
+        inside = (nk >= 0) & (nk < grid.n_theta) & (nj >= 0) & (nj < grid.n_rho)
+        return jnp.where(inside, nk * grid.n_rho + nj, grid.size)
+
+    return cells, neighbours
 
 
-def _if_any(flag, fn, state, out):
-    """``fn(state, out)`` if ``flag``, else the inputs unchanged.
+def _circle_wiring(grid: CircleGrid):
+    """:func:`_line_wiring` for a circle grid: an event's ring cells, 3 x 3 x 3 neighbourhoods."""
+    offsets = jnp.asarray(ring_offsets(grid))
+    d = np.stack([a.reshape(-1) for a in np.meshgrid(*(np.arange(-1, 2),) * 3, indexing="ij")], axis=1)
 
-    A while loop of at most one trip rather than ``lax.cond``: under ``vmap`` a
-    cond runs both branches for every stream, whereas the loop body runs only
-    when some stream of the batch needs it. Firing is rare, so the common event
-    pays for no inhibition at all.
-    """
+    def cells(x, y, valid):
+        flat, inside = _ring_cells(grid, offsets, x[:, None], y[:, None])
+        ok = valid[:, None] & inside
+        return jnp.where(ok, flat, grid.size), ok
 
-    def body(carry):
-        _, state, out = carry
-        return (False,) + tuple(fn(state, out))
-
-    _, state, out = jax.lax.while_loop(lambda c: c[0], body, (flag, state, out))
-    return state, out
-
-
-def _gather_update(params, state, cells, t, p):
-    """Lazy decay (Alg. 1, line 2) and input (line 3) of the touched cells, written back."""
-    old = state[cells]
-    new = _decay(old[:, 0], params.decay * (t - old[:, 1])) + p.astype(jnp.float32)
-    # Written as the change from the gathered values: XLA updates the state in
-    # place for a scatter-add after a gather, where a scatter-set makes it copy.
-    update = jnp.stack([new, jnp.broadcast_to(t, new.shape)], axis=1) - old
-    return state.at[cells].add(update, mode="promise_in_bounds"), new
-
-
-def _line_event(params, grid: LineGrid, table, carry, event):
-    """Alg. 1 for the ``n_theta`` cells one event votes for (one per angle, Alg. 2)."""
-    state, out = carry  # state: (size + 1, 2) rows (v, t_last); the last row is a dummy
-    x, y, t, p, valid = event
-    n_rho, size, n_theta = grid.n_rho, grid.size, grid.n_theta
-    on = valid & (x >= 0) & (x < grid.width) & (y >= 0) & (y < grid.height)
-    cells = table[jnp.where(on, y * grid.width + x, 0)]
-    ok = on & (cells < size)
-    cells = jnp.where(ok, cells, size)
-    state, new = _gather_update(params, state, cells, t, p)
-    cross = ok & (jnp.abs(new) >= params.v_th)
-
-    rho = cells - jnp.arange(n_theta) * n_rho
-    dk, dj = (a.reshape(-1) for a in jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij"))
-
-    def neighbours(i):
-        nk, nj = i + dk, rho[i] + dj
-        inside = (nk >= 0) & (nk < n_theta) & (nj >= 0) & (nj < n_rho)
-        return jnp.where(inside, nk * n_rho + nj, size)
-
-    def fire(state, out):
-        return _inhibit(state, out, cross, cells, jnp.sign(new).astype(jnp.int8), neighbours)
-
-    return _if_any(jnp.any(cross), fire, state, out)
-
-
-def _circle_event(params, grid: CircleGrid, offsets, carry, event):
-    """Alg. 1 for the ring cells one event votes for, all updated at once."""
-    state, out = carry
-    x, y, t, p, valid = event
-    size = grid.size
-    flat, inside = _ring_cells(grid, offsets, x, y)
-    ok = valid & inside
-    cells = jnp.where(ok, flat, size)
-    state, new = _gather_update(params, state, cells, t, p)
-    fired = ok & (jnp.abs(new) >= params.v_th)
-    d = jnp.stack([a.reshape(-1) for a in jnp.meshgrid(*(jnp.arange(-1, 2),) * 3, indexing="ij")], axis=1)
-
-    def neighbours(i):
-        kr = offsets[i, 0] + d[:, 0]
-        b = y + offsets[i, 1] + d[:, 1]
-        a = x + offsets[i, 2] + d[:, 2]
+    def neighbours(flat, which, x, y):
+        o = offsets[which]  # (B, K, 3)
+        kr = o[..., 0, None] + d[:, 0]
+        b = y[:, None, None] + o[..., 1, None] + d[:, 1]
+        a = x[:, None, None] + o[..., 2, None] + d[:, 2]
         inside = (kr >= 0) & (kr < grid.n_r) & (b >= 0) & (b < grid.height) & (a >= 0) & (a < grid.width)
-        return jnp.where(inside, (kr * grid.height + b) * grid.width + a, size)
+        return jnp.where(inside, (kr * grid.height + b) * grid.width + a, grid.size)
 
-    def fire(state, out):
-        return _inhibit(state, out, fired, cells, jnp.sign(new).astype(jnp.int8), neighbours)
+    return cells, neighbours
 
-    return _if_any(jnp.any(fired), fire, state, out)
+
+def _async_batch(params: HoughParams, grid: Grid, state: HoughState, events: Events, chunk: int = 8):
+    """:func:`async_run` for a batch of ``B`` streams (leading axis of every leaf), written out.
+
+    The loop runs over event positions, not streams: step ``i`` feeds event ``i``
+    of every stream at once, so that each step is one gather and one scatter-add
+    of ``B x m`` cells (``m`` the cells an event votes for) on a flat state of
+    ``B`` grids, each with a dummy cell ``grid.size`` that masked votes go to.
+    A ``vmap`` of the one-stream loop does the same work, but XLA's CPU backend
+    copies the whole batched state on every event there.
+
+    Inhibition (Alg. 1, line 5) runs only on steps where some stream fired: the
+    fired cells of each stream are packed to the front, and their
+    neighbourhoods reset ``chunk`` cells per stream at a time.
+    """
+    size, n = grid.size, grid.size + 1
+    batch = state.v.shape[0]
+    base = jnp.arange(batch, dtype=jnp.int32) * n
+    v_th = jnp.broadcast_to(params.v_th, (batch,))
+    decay = jnp.broadcast_to(params.decay, (batch,))
+    cells_of, neighbours_of = _line_wiring(grid) if isinstance(grid, LineGrid) else _circle_wiring(grid)
+    packed = jnp.stack([state.v.reshape(batch, size), state.t.reshape(batch, size)], axis=-1)
+    packed = jnp.concatenate([packed, jnp.zeros((batch, 1, 2), jnp.float32)], axis=1).reshape(batch * n, 2)
+
+    def step(carry, event):
+        packed, out = carry
+        x, y, t, p, valid = event  # each (B,)
+        cells, ok = cells_of(x, y, valid)  # (B, m)
+        flat = cells + base[:, None]
+        old = packed[flat]
+        # Alg. 1, lines 2-3, with the decay since each cell's own last update.
+        new = _decay(old[..., 0], decay[:, None] * (t[:, None] - old[..., 1])) + p[:, None].astype(jnp.float32)
+        # Written as the change from the gathered values: XLA updates the state in
+        # place for a scatter-add after a gather, where a scatter-set makes it copy.
+        # Masked votes add nothing, so the dummy cell stays at (0, 0).
+        update = jnp.stack([new, jnp.broadcast_to(t[:, None], new.shape)], axis=-1) - old
+        packed = packed.at[flat].add(jnp.where(ok[..., None], update, 0.0), mode="promise_in_bounds")
+        fired = ok & (jnp.abs(new) >= v_th[:, None])
+
+        def inhibit(packed, out):
+            m = fired.shape[1]
+            count = jnp.sum(fired, axis=1)
+            rows = jnp.arange(batch)[:, None]
+            # The fired cells' positions in cells, packed to the front of each row.
+            order = jnp.zeros(fired.shape, jnp.int32).at[rows, jnp.where(fired, jnp.cumsum(fired, axis=1) - 1, m)].set(
+                jnp.broadcast_to(jnp.arange(m, dtype=jnp.int32), fired.shape), mode="drop"
+            )
+            signs = jnp.sign(new).astype(jnp.int8)
+
+            def body(carry):
+                i, packed, out = carry
+                slots = i * chunk + jnp.arange(chunk)
+                live = slots < count[:, None]  # (B, chunk)
+                which = order[:, jnp.minimum(slots, m - 1)]
+                idx = jnp.where(live[..., None], neighbours_of(cells, which, x, y), size) + base[:, None, None]
+                packed = packed.at[idx.reshape(-1), 0].set(0.0, mode="promise_in_bounds")
+                spiked = jnp.where(live, jnp.take_along_axis(cells, which, axis=1), size) + base[:, None]
+                out = out.at[spiked.reshape(-1)].set(
+                    jnp.take_along_axis(signs, which, axis=1).reshape(-1), mode="promise_in_bounds"
+                )
+                return i + 1, packed, out
+
+            most = jnp.max(count)
+            _, packed, out = jax.lax.while_loop(lambda c: c[0] * chunk < most, body, (0, packed, out))
+            return packed, out
+
+        return jax.lax.cond(jnp.any(fired), inhibit, lambda packed, out: (packed, out), packed, out), None
+
+    def slot(packed, events):
+        out = jnp.zeros((batch * n,), jnp.int8)
+        (packed, out), _ = jax.lax.scan(step, (packed, out), events)
+        return packed, out.reshape(batch, n)[:, :size].reshape((batch,) + grid.shape)
+
+    # (B, n_slots, capacity) -> (n_slots, capacity, B): one scan step per event position.
+    events = jax.tree.map(lambda a: jnp.moveaxis(a, 0, -1), tuple(events))
+    packed, spikes = jax.lax.scan(slot, packed, events)
+    packed = packed.reshape(batch, n, 2)[:, :size]
+    state = HoughState(packed[..., 0].reshape(state.v.shape), packed[..., 1].reshape(state.t.shape))
+    return state, jnp.moveaxis(spikes, 0, 1)
 
 
 def async_step(
@@ -645,20 +724,8 @@ def async_step(
         ``(state, spikes)``: spikes of shape ``grid.shape``, int8, the sign of the
         last spike of each neuron during the slot (0 if it did not fire).
     """
-    size = grid.size
-    packed = jnp.stack([state.v.reshape(-1), state.t.reshape(-1)], axis=1)
-    carry = (jnp.concatenate([packed, jnp.zeros((1, 2), jnp.float32)]), jnp.zeros((size + 1,), jnp.int8))
-    if isinstance(grid, LineGrid):
-        wiring = jnp.asarray(line_table(grid))
-        step = functools.partial(_line_event, params, grid, wiring)
-    elif isinstance(grid, CircleGrid):
-        wiring = jnp.asarray(ring_offsets(grid))
-        step = functools.partial(_circle_event, params, grid, wiring)
-    else:
-        raise UserError(f"not a Hough grid: {type(grid).__name__}")
-    (packed, out), _ = jax.lax.scan(lambda c, e: (step(c, e), None), carry, tuple(events))
-    state = HoughState(packed[:size, 0].reshape(grid.shape), packed[:size, 1].reshape(grid.shape))
-    return state, out[:size].reshape(grid.shape)
+    state, spikes = async_run(params, grid, jax.tree.map(lambda a: a[None], events), state)
+    return state, spikes[0]
 
 
 @functools.partial(jax.jit, static_argnames=("grid",))
@@ -677,39 +744,43 @@ def async_run(
     Returns:
         ``(state, spikes)``, spikes ``(n_slots, *grid.shape)`` int8.
     """
+    if not isinstance(grid, (LineGrid, CircleGrid)):
+        raise UserError(f"not a Hough grid: {type(grid).__name__}")
     if state is None:
         state = init(grid)
     return _async_streams(grid)(params, state, events)
 
 
+def _broadcast_unbatched(axis_size, in_batched, args):
+    return jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, in_batched)
+
+
 @functools.cache
 def _async_streams(grid: Grid):
-    """:func:`async_run` for one stream, batched over streams by ``lax.map`` on a CPU.
+    """:func:`async_run` for one stream; under ``vmap``, :func:`_async_batch` over the streams.
 
-    ``jax.vmap`` of the event loop makes XLA's CPU backend copy the whole grid
-    state on every event (batched scatters inside nested loops are not done in
-    place), about 15 times slower than running the streams one after another,
-    each in place. So under ``vmap`` on a CPU this function maps over the
-    streams instead (``jax.custom_batching``); on accelerators it vmaps.
+    Nested ``vmap``s fold into one batch of streams.
     """
 
-    def run(params, state, events):
-        return jax.lax.scan(lambda s, ev: async_step(params, grid, s, ev), state, events)
-
     @jax.custom_batching.custom_vmap
-    def batched(params, state, events):
-        return run(params, state, events)
+    def streams(params, state, events):  # a leading stream axis on every leaf
+        return _async_batch(params, grid, state, events)
 
-    @batched.def_vmap
-    def _rule(axis_size, in_batched, params, state, events):
-        args = (params, state, events)
-        args = jax.tree.map(
-            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, tuple(in_batched)
-        )
-        if jax.default_backend() == "cpu":
-            out = jax.lax.map(lambda a: batched(*a), args)
-        else:
-            out = jax.vmap(run)(*args)
+    @streams.def_vmap
+    def _fold(axis_size, in_batched, params, state, events):
+        args = _broadcast_unbatched(axis_size, tuple(in_batched), (params, state, events))
+        out = streams(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        out = jax.tree.map(lambda a: a.reshape((axis_size, -1) + a.shape[1:]), out)
         return out, jax.tree.map(lambda _: True, out)
 
-    return batched
+    @jax.custom_batching.custom_vmap
+    def one(params, state, events):
+        out = streams(*jax.tree.map(lambda a: jnp.asarray(a)[None], (params, state, events)))
+        return jax.tree.map(lambda a: a[0], out)
+
+    @one.def_vmap
+    def _batch(axis_size, in_batched, params, state, events):
+        out = streams(*_broadcast_unbatched(axis_size, tuple(in_batched), (params, state, events)))
+        return out, jax.tree.map(lambda _: True, out)
+
+    return one

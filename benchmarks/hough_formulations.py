@@ -1,0 +1,151 @@
+"""Speed ratios of the spiking Hough line detector to its peers, measured side by side.
+
+On a shared machine absolute figures drift from run to run, so this script
+reports ratios measured in one process: the candidates are timed in turn
+(interleaved), each round keeps the best of ``--repeats`` calls per candidate,
+and the ratio of each round is printed with the median over ``--rounds``.
+
+* votes only: :func:`hough.line_votes`, ``vmap`` over streams and slots, vs
+  ``skimage.transform.hough_line`` (the bare accumulator, 180 angles) on the
+  same frames (frames/s);
+* whole detector, synchronous: ``vmap`` of :func:`hough.sync_run` over streams
+  (votes + bipolar LIF + 3 x 3 inhibition, one slot a frame), vs the same
+  ``hough_line`` (frames/s);
+* asynchronous: ``vmap`` of :func:`hough.async_run` over distinct streams (each
+  a different order and mirror image of the frames), vs the NumPy per-event
+  loop of :mod:`spikejax.vision.bench_hough` (events/s).
+
+``--baseline FILE`` adds the same rows for another version of ``hough.py``
+(e.g. ``git show COMMIT:spikejax/vision/hough.py > /tmp/old_hough.py``) and
+checks that it gives the same spikes and potentials.
+
+Usage::
+
+    .venv/bin/python benchmarks/hough_formulations.py --batch 64 --async-batch 256
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from skimage.transform import hough_line
+
+from spikejax.vision import bench_hough, hough
+
+
+def _load(path):
+    spec = importlib.util.spec_from_file_location("hough_baseline", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["hough_baseline"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def _distinct_streams(events, batch, n_slots):
+    """``batch`` different streams of ``n_slots`` slots: rolled slots, mirrored in x and y."""
+
+    def stream(i):
+        e = jax.tree.map(lambda a: jnp.roll(a, i, axis=0)[:n_slots], events)
+        if i % 2:
+            e = e._replace(x=jnp.where(e.valid, 127 - e.x, e.x))
+        if (i // 2) % 2:
+            e = e._replace(y=jnp.where(e.valid, 127 - e.y, e.y))
+        return e
+
+    return jax.tree.map(lambda *a: jnp.stack(a), *[stream(i) for i in range(batch)])
+
+
+def _rounds(cands, rounds, repeats):
+    """Per round, the best seconds per unit of each candidate, as ratios to the first candidate's."""
+    ratios = {k: [] for k in cands}
+    for _ in range(rounds):
+        best = {}
+        for _ in range(repeats):
+            for k, (fn, units) in cands.items():
+                t = time.perf_counter()
+                jax.block_until_ready(fn())
+                best[k] = min(best.get(k, np.inf), (time.perf_counter() - t) / units)
+        for k in cands:
+            ratios[k].append(best[next(iter(cands))] / best[k])
+    return ratios
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batch", type=int, default=64, help="streams for the votes and sync rows")
+    parser.add_argument("--async-batch", type=int, default=256, help="streams for the async rows")
+    parser.add_argument("--async-slots", type=int, default=1, help="slots (frames) per async stream")
+    parser.add_argument("--rounds", type=int, default=4)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--baseline", help="another hough.py to compare with")
+    args = parser.parse_args(argv)
+
+    events, images = bench_hough.frames("line")
+    n_slots = events.x.shape[0]
+    thetas = hough.LineGrid().skimage_thetas()
+    params = hough.hough_params(8.0, 50.0)
+    times = jnp.arange(1, n_slots + 1, dtype=jnp.float32) * 0.01
+    streams = jax.tree.map(lambda a: jnp.broadcast_to(a, (args.batch,) + a.shape), events)
+    a_streams = _distinct_streams(events, args.async_batch, args.async_slots)
+    a_events = float(a_streams.valid.sum())
+    print(f"{jax.devices()[0].platform}, jax {jax.__version__}; {float(events.count().mean()):.0f} events a frame; "
+          f"sync batch {args.batch} x {n_slots} frames, async batch {args.async_batch} x {args.async_slots} frames")
+
+    sync_cands = {"skimage hough_line": (lambda: [hough_line(im, thetas) for im in images], len(images))}
+    async_cands = {}
+    modules = [("", hough)] + ([("baseline ", _load(args.baseline))] if args.baseline else [])
+    fns = {}
+    for label, mod in modules:
+        grid = mod.LineGrid()
+        votes = jax.jit(jax.vmap(jax.vmap(lambda e, mod=mod, grid=grid: mod.line_votes(grid, e))))
+        sync = jax.jit(jax.vmap(lambda e, mod=mod, grid=grid: mod.sync_run(params, grid, e, times)))
+        asyn = jax.jit(jax.vmap(lambda e, mod=mod, grid=grid: mod.async_run(params, grid, e)))
+        fns[label] = (votes, sync, asyn)
+        sync_cands[f"{label}votes only"] = (lambda f=votes: f(streams), args.batch * n_slots)
+        sync_cands[f"{label}whole detector, sync"] = (lambda f=sync: f(streams), args.batch * n_slots)
+        async_cands[f"{label}async"] = (lambda f=asyn: f(a_streams), a_events)
+    t = time.perf_counter()
+    for fn, _ in [*sync_cands.values(), *async_cands.values()]:
+        jax.block_until_ready(fn())
+    print(f"compiled and warmed up in {time.perf_counter() - t:.1f} s")
+    if args.baseline:
+        for i, (new, old) in enumerate(zip(fns[""], fns["baseline "])):
+            arg = a_streams if i == 2 else streams
+            same = [np.array_equal(a, b) for a, b in zip(jax.tree.leaves(new(arg)), jax.tree.leaves(old(arg)))]
+            print(f"same results as the baseline ({['votes', 'sync', 'async'][i]}): {all(same)}")
+
+    ratios = _rounds(sync_cands, args.rounds, args.repeats)
+    print(f"\n{'candidate':30s} {'ratio per round':27s} median")
+    for k, r in ratios.items():
+        print(f"{k:30s} {' '.join(f'{x:5.2f}' for x in r):27s} {np.median(r):5.2f} x skimage hough_line (frames/s)")
+
+    # Async: each round times the NumPy per-event loop (one stream) once, then
+    # the candidates (best of --repeats); events/s over all streams.
+    rates = {k: [] for k in async_cands}
+    loop = []
+    for _ in range(args.rounds):
+        loop.append(bench_hough._numpy_async(events, 1)["events_per_s"])
+        for k, (fn, units) in async_cands.items():
+            rates[k].append(max(units / _timed(fn) for _ in range(args.repeats)))
+    print(f"NumPy per-event loop: {np.median(loop) / 1e6:.3f} M events/s (median of {args.rounds})")
+    for k, r in rates.items():
+        ratio = [a / b for a, b in zip(r, loop)]
+        print(f"{k:30s} {' '.join(f'{x:5.1f}' for x in ratio):27s} {np.median(ratio):5.1f} x the NumPy loop, "
+              f"{np.median(r) / 1e6:.3f} M events/s")
+    return 0
+
+
+def _timed(fn) -> float:
+    t = time.perf_counter()
+    jax.block_until_ready(fn())
+    return time.perf_counter() - t
+
+
+if __name__ == "__main__":
+    sys.exit(main())
