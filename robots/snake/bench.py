@@ -9,15 +9,15 @@ implementations are timed in the same run, at batch sizes 1 to 1024:
   pool of one thread per CPU core steps the batch through the same MJCF and
   the same servo targets (the gait's, computed beforehand), nothing else.
 - ``mujoco backend closed loop``: ``jax.jit(jax.vmap(run))`` where ``run`` is
-  a ``lax.scan`` of control steps, each evaluating the gait (Eq. (1),
-  steering, head compensation) in JAX, stepping the physics through the
-  ``"mujoco"`` backend's callback and computing the head camera's pose and
-  the centre of mass in JAX.
+  a ``lax.scan`` of env steps, each evaluating the gait (Eq. (1), steering,
+  head compensation) in JAX, stepping the physics through the ``"mujoco"``
+  backend's callback, then moving the target, rendering the head camera and
+  making its events in JAX.
 - ``mjx backend closed loop``: the same program with the ``"mjx"`` backend.
 
-If ``robots.snake.env`` provides the Brax-shaped env (physics + head camera
-+ DVS events), the closed loops time its ``step`` instead of the gait alone
-(the ``loop`` column says which).
+The closed loops time :class:`robots.snake.env.SnakeEnv`'s ``step`` on the
+8-shaped track: the gait, the physics, the target's motion, the head camera's
+128 x 128 frame and its frame-difference DVS events, for every snake.
 
 Compile time (``lower(...).compile()``) is reported apart from run time (the
 fastest of ``repeats`` runs). Each row also gives the simulated seconds per
@@ -46,6 +46,7 @@ from mujoco import rollout as mj_rollout
 from robots.common import write_csv
 from robots.snake.gait import default_gait
 from robots.snake.gait import joint_targets
+from robots.snake.env import SnakeEnv
 from robots.snake.physics import make_physics
 from spikejax.errors import UserError
 
@@ -68,6 +69,7 @@ EPISODE_SECONDS = 3021.86  # its simulated time, s
 C_BUDGET = 400_000
 MJX_BUDGET = 40_000
 MIN_CONTROL_STEPS = 5
+LOOP = "env step (physics + camera + events)"
 
 ROW_FIELDS = ("impl", "loop", "batch", "control_steps", "compile_s", "run_s", "env_steps_per_s",
               "physics_steps_per_s", "sim_s_per_wall_s", "vs_c_physics", "episode_wall_s")
@@ -119,56 +121,45 @@ def bench_c_physics(batch: int, n: int, *, nthread: int | None = None, repeats: 
     return _row("MuJoCo C physics only", loop, batch, n, 0.0, run_s, phys.substeps, phys.dt * phys.substeps)
 
 
-def _env_loop(phys):
-    """The closed loop to time: the env's step if `robots.snake.env` provides one, else gait + physics."""
-    try:
-        from robots.snake import env as env_module
-    except ImportError:
-        env_module = None
-    make_env = getattr(env_module, "make_env", None) if env_module is not None else None
-    if make_env is not None:
-        env = make_env(physics=phys)
-
-        def run(key, steer, n):
-            state = env.reset(key)
-            action = jnp.zeros(env.action_size).at[0].set(steer)
-
-            def body(s, _):
-                return env.step(s, action), None
-
-            return jax.lax.scan(body, state, None, length=n)[0].obs
-
-        return "env step (physics + camera + events)", run
-
-    gait = default_gait()
+def _env_run(backend: str):
+    """The closed loop timed: ``SnakeEnv.step`` (gait, physics, target, head camera, DVS events) in a ``lax.scan``."""
+    env = SnakeEnv("eight", backend)
 
     def run(key, steer, n):
+        action = jnp.zeros(env.action_size).at[0].set(steer)
+
         def body(s, _):
-            return phys.step(s, joint_targets(gait, s.time, steer)), None
+            return env.step(s, action), None
 
-        return jax.lax.scan(body, phys.init(), None, length=n)[0].head_pos
+        final = jax.lax.scan(body, env.reset(key), None, length=n)[0]
+        return final.obs, final.metrics["events"]
 
-    return "gait + physics", run
+    return env, run
 
 
-def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2) -> dict:
-    """``jax.jit(jax.vmap(run))`` of ``batch`` snakes for ``n`` control steps with ``backend``; compile apart."""
-    phys = make_physics(backend)
-    loop, run = _env_loop(phys)
+def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2, compiler_options=None) -> dict:
+    """``jax.jit(jax.vmap(run))`` of ``batch`` snake envs for ``n`` control steps with ``backend``; compile apart.
+
+    ``compiler_options`` go to XLA's compile call (e.g. ``{"xla_cpu_multi_thread_eigen": False}``).
+    """
+    env, run = _env_run(backend)
+    phys = env.physics
     keys = jax.random.split(jax.random.key(0), batch)
-    steers = jnp.asarray(_steers(batch), jnp.float32)
+    steers = jnp.asarray(_steers(batch) / env.max_steer, jnp.float32)
     fn = jax.jit(jax.vmap(lambda k, s: run(k, s, n)))
     t0 = time.perf_counter()
-    compiled = fn.lower(keys, steers).compile()
+    compiled = fn.lower(keys, steers).compile(compiler_options)
     compile_s = time.perf_counter() - t0
     run_s = math.inf
     for _ in range(repeats):
         t0 = time.perf_counter()
-        out = jax.block_until_ready(compiled(keys, steers))
+        obs, events = jax.block_until_ready(compiled(keys, steers))
         run_s = min(run_s, time.perf_counter() - t0)
-    if not bool(jnp.all(jnp.isfinite(out))):
+    if not bool(jnp.all(jnp.isfinite(obs))):
         raise RuntimeError(f"{backend} closed loop produced non-finite values")
-    return _row(f"{backend} backend closed loop", loop, batch, n, compile_s, run_s, phys.substeps,
+    if not bool(jnp.all(events > 0)):
+        raise RuntimeError(f"{backend} closed loop: a snake's camera saw no events in its last step")
+    return _row(f"{backend} backend closed loop", LOOP, batch, n, compile_s, run_s, phys.substeps,
                 phys.dt * phys.substeps)
 
 
