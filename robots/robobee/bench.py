@@ -85,6 +85,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from robots.common import run_isolated
 from robots.robobee import bench_network
 from robots.robobee.controller import TORQUE_UNIT
 from robots.robobee.controller import ControllerConfig
@@ -604,7 +605,7 @@ def main(args: argparse.Namespace) -> int:
     kept; default 1), ``randomize`` (also fly randomized robots at the largest
     batch), ``brian2_target`` (``"cython"``, the default, or ``"numpy"``) and
     ``network`` (False skips the network-alone table). Brian2 runs in a fresh
-    process of its own (`bench_network._isolated`), one flight on one core;
+    process of its own (`run_isolated`), one flight on one core;
     spikejax's batch uses every core XLA gives it.
     """
     duration = float(getattr(args, "duration", None) or FLIGHT_S)
@@ -618,7 +619,7 @@ def main(args: argparse.Namespace) -> int:
           f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
           f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
     brian2_target = getattr(args, "brian2_target", None) or "cython"
-    runs = [lambda: bench_network._isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration)]
+    runs = [lambda: run_isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration)]
     runs += [lambda b=b: run_spikejax_flights(b, duration, seed, repeats=repeats) for b in batches]
     if getattr(args, "randomize", False):
         runs.append(lambda: run_spikejax_flights(max(batches), duration, seed, randomize_robots=True, repeats=repeats))

@@ -85,12 +85,10 @@ import argparse
 import csv
 import functools
 import math
-import multiprocessing
 import os
 import platform
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -98,6 +96,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from robots.common import run_isolated
 from spikejax.neurons import LIFParams
 from spikejax.neurons import LIFState
 from spikejax.neurons import lif_init
@@ -671,28 +670,16 @@ def _import_nest():
 BATCHES = (1, 16, 256, 1024)
 
 
-def _isolated(fn, *args, **kwargs):
-    """``fn(*args, **kwargs)`` in a fresh Python process.
-
-    Each peer runs alone in its process: no thread pool of another library
-    (XLA's, a previous NEST kernel's OpenMP threads) competes with its threads,
-    and Brian2's device state starts clean. The process ends normally, so its
-    libraries' exit handlers run (Brian2's removes its log files).
-    """
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(fn, *args, **kwargs).result()
-
-
 def _runs(duration: float, seed: int, batches: tuple[int, ...], repeats: int) -> list:
     """The table's rows to measure, in order, as thunks."""
     big = max(batches)
     kw = dict(repeats=repeats)
     runs = [
-        lambda: _isolated(run_numpy, duration, seed),
-        lambda: _isolated(run_brian2_runtime, duration, seed, **kw),
-        lambda: _isolated(run_brian2_standalone, duration, seed, **kw),
-        lambda: _isolated(run_nest, duration, seed, threads=1, **kw),
-        lambda: _isolated(run_nest, duration, seed, threads=2, **kw),
+        lambda: run_isolated(run_numpy, duration, seed),
+        lambda: run_isolated(run_brian2_runtime, duration, seed, **kw),
+        lambda: run_isolated(run_brian2_standalone, duration, seed, **kw),
+        lambda: run_isolated(run_nest, duration, seed, threads=1, **kw),
+        lambda: run_isolated(run_nest, duration, seed, threads=2, **kw),
     ]
     runs += [lambda b=b: run_spikejax(b, duration, seed, **kw) for b in batches]
     # The formulations that lost, at the largest batch (the gather at 16: it is slow).

@@ -13,7 +13,9 @@ implementations are timed in the same run, at batch sizes 1 to 1024:
   head compensation) in JAX, stepping the physics through the ``"mujoco"``
   backend's callback, then moving the target, rendering the head camera and
   making its events in JAX.
-- ``mjx backend closed loop``: the same program with the ``"mjx"`` backend.
+- ``mjx backend closed loop``: the same program with the ``"mjx"`` backend,
+  each batch in a fresh process (`robots.common.run_isolated`): in a process
+  where MuJoCo's rollout threads had run, an MJX batch of 256 never returned.
 
 The closed loops time :class:`robots.snake.env.SnakeEnv`'s ``step`` on the
 8-shaped track: the gait, the physics, the target's motion, the head camera's
@@ -43,6 +45,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
+from robots.common import run_isolated
 from robots.common import write_csv
 from robots.snake.gait import default_gait
 from robots.snake.gait import joint_targets
@@ -67,7 +70,7 @@ EPISODE_STEPS = 151_093  # control steps of the paper's first training episode
 EPISODE_SECONDS = 3021.86  # its simulated time, s
 # Physics steps (batch x control steps x substeps) a timed run aims at.
 C_BUDGET = 400_000
-MJX_BUDGET = 40_000
+MJX_BUDGET = 10_000
 MIN_CONTROL_STEPS = 5
 LOOP = "env step (physics + camera + events)"
 
@@ -208,12 +211,22 @@ def main(args: argparse.Namespace) -> int:
 
     jobs = [("c", b) for b in batches] + [(backend, b) for backend in backends for b in batches]
     rows = []
-    for kind, batch in tqdm(jobs, desc="snake bench", disable=getattr(args, "no_progress", False)):
+    bar = tqdm(jobs, desc="snake bench", disable=getattr(args, "no_progress", False))
+    for kind, batch in bar:
         if kind == "c":
-            rows.append(bench_c_physics(batch, _control_steps(batch, phys.substeps, c_budget)))
+            row = bench_c_physics(batch, _control_steps(batch, phys.substeps, c_budget))
         else:
             budget = MJX_BUDGET if kind == "mjx" else c_budget
-            rows.append(bench_closed_loop(kind, batch, _control_steps(batch, phys.substeps, budget)))
+            n = _control_steps(batch, phys.substeps, budget)
+            if kind == "mjx":
+                # A fresh process: after MuJoCo's rollout threads have run, an MJX batch of 256 or more
+                # never returned here (every XLA worker idle, the caller waiting; jax 0.10.2).
+                row = run_isolated(bench_closed_loop, kind, batch, n, repeats=1)
+            else:
+                row = bench_closed_loop(kind, batch, n)
+        rows.append(row)
+        bar.write(f"  {row['impl']}, batch {batch}: {row['env_steps_per_s']:,.0f} env-steps/s "
+                  f"(compile {row['compile_s']:.1f} s)")
     c_rate = {r["batch"]: r["env_steps_per_s"] for r in rows if r["impl"].startswith("MuJoCo C")}
     for r in rows:
         r["vs_c_physics"] = r["env_steps_per_s"] / c_rate[r["batch"]]
