@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from spikejax.vision import compact
 
@@ -25,3 +26,19 @@ def test_compact_pads_with_invalid_slots():
     np.testing.assert_array_equal(events.valid, [True, True, False, False, False])
     np.testing.assert_array_equal(events.x, [3, 5, 0, 0, 0])
     assert int(overflow) == 0 and int(events.count()) == 2
+
+
+@pytest.mark.parametrize("n, capacity", [(16384, 2048), (16384, 100), (1000, 64), (128, 16)])
+def test_compact_matches_numpy_selection_on_frames(n, capacity):
+    # 16384 takes the row-by-row running count, 1000 and 128 the plain one.
+    rng = np.random.default_rng(n + capacity)
+    mask = rng.random(n) < 0.05
+    x = np.arange(n)
+    events, overflow = compact(x, x // 7, 0.25, np.where(x % 3, 1, -1), mask, capacity)
+    chosen = np.flatnonzero(mask)[:capacity]
+    k = len(chosen)
+    np.testing.assert_array_equal(np.asarray(events.x)[:k], chosen)
+    np.testing.assert_array_equal(np.asarray(events.y)[:k], chosen // 7)
+    np.testing.assert_array_equal(np.asarray(events.p)[:k], np.where(chosen % 3, 1, -1))
+    assert np.asarray(events.valid).sum() == k and not np.asarray(events.valid)[k:].any()
+    assert int(overflow) == max(int(mask.sum()) - capacity, 0)

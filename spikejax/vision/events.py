@@ -50,6 +50,20 @@ def empty(capacity: int) -> Events:
     return Events(zeros, zeros, jnp.zeros((capacity,), jnp.float32), zeros, jnp.zeros((capacity,), bool))
 
 
+def _running_count(mask: jax.Array, block: int = 128) -> jax.Array:
+    """``cumsum(mask)`` as int32, row by row when rows of ``block`` divide ``mask``.
+
+    On a CPU under ``vmap`` one long ``cumsum`` of a 128 x 128 frame takes
+    about twice as long as ``cumsum`` along rows plus the rows' offsets.
+    """
+    n = mask.shape[0]
+    if n % block or n <= block:
+        return jnp.cumsum(mask, dtype=jnp.int32)
+    within = jnp.cumsum(mask.reshape(n // block, block), axis=1, dtype=jnp.int32)
+    before = jnp.cumsum(within[:, -1]) - within[:, -1]
+    return (within + before[:, None]).reshape(n)
+
+
 def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
     """Pack the entries where ``mask`` holds into ``capacity`` slots, in order.
 
@@ -61,11 +75,11 @@ def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
     Slot ``k`` holds the entry where the running count of selected entries
     reaches ``k + 1``, found by binary search of the running count: gathers
     of ``capacity`` entries rather than scatters of all ``n``, which under
-    ``vmap`` on a CPU is 2.3 times faster for a 128 x 128 frame.
+    ``vmap`` on a CPU is about 3 times faster for a 128 x 128 frame.
     """
     mask = jnp.asarray(mask, bool).reshape(-1)
     n = mask.shape[0]
-    count = jnp.cumsum(mask, dtype=jnp.int32)
+    count = _running_count(mask)
     total = count[-1] if n else jnp.zeros((), jnp.int32)
     # Slots beyond the total find index n: the padding entry appended below.
     source = jnp.searchsorted(count, jnp.arange(1, capacity + 1, dtype=jnp.int32), side="left")
