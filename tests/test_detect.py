@@ -168,3 +168,14 @@ def test_command_reports_bad_input(tmp_path, capsys):
     assert "time stamps go backwards at event 2" in capsys.readouterr().err
     assert cli.main(["detect", "pipe", str(tmp_path / "back.npy"), "--slot", "0"]) == 2
     assert "--slot must be > 0" in capsys.readouterr().err
+
+
+def test_async_circles_warn_that_they_are_slow(tmp_path, capsys):
+    a = np.zeros(20, io.EVENT_DTYPE)
+    a["x"], a["y"], a["t"], a["p"] = np.arange(20) + 40, 64, np.arange(20) * 100, 1
+    np.save(tmp_path / "few.npy", a)
+    assert cli.main(["detect", "pipe", str(tmp_path / "few.npy"), "--mode", "async", "--shapes", "circles",
+                     "--no-progress"]) == 0
+    assert "asynchronous circle detection is slow" in capsys.readouterr().err
+    assert cli.main(["detect", "pipe", str(tmp_path / "few.npy"), "--shapes", "circles", "--no-progress"]) == 0
+    assert "slow" not in capsys.readouterr().err
