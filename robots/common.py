@@ -44,8 +44,9 @@ def run_isolated(fn, *args, **kwargs):
 
     A benchmark runs each peer alone in its process, so that no thread pool of
     another library (XLA's, MuJoCo's rollout threads, a NEST kernel's OpenMP
-    threads) competes with its threads or shares its state. The process ends
-    normally, so its libraries' exit handlers run.
+    threads) competes with its threads or shares its state (Brian2's device
+    starts clean). The process ends normally, so its libraries' exit handlers
+    run (Brian2's removes its log files).
     """
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
         return pool.submit(fn, *args, **kwargs).result()

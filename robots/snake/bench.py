@@ -49,9 +49,9 @@ from mujoco import rollout as mj_rollout
 
 from robots.common import run_isolated
 from robots.common import write_csv
+from robots.snake.env import SnakeEnv
 from robots.snake.gait import default_gait
 from robots.snake.gait import joint_targets
-from robots.snake.env import SnakeEnv
 from robots.snake.physics import make_physics
 from spikejax.errors import UserError
 
@@ -144,18 +144,15 @@ def _env_run(backend: str):
     return env, run
 
 
-def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2, compiler_options=None) -> dict:
-    """``jax.jit(jax.vmap(run))`` of ``batch`` snake envs for ``n`` control steps with ``backend``; compile apart.
-
-    ``compiler_options`` go to XLA's compile call (e.g. ``{"xla_cpu_multi_thread_eigen": False}``).
-    """
+def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2) -> dict:
+    """``jax.jit(jax.vmap(run))`` of ``batch`` snake envs for ``n`` control steps with ``backend``; compile apart."""
     env, run = _env_run(backend)
     phys = env.physics
     keys = jax.random.split(jax.random.key(0), batch)
     steers = jnp.asarray(_steers(batch) / env.max_steer, jnp.float32)
     fn = jax.jit(jax.vmap(lambda k, s: run(k, s, n)))
     t0 = time.perf_counter()
-    compiled = fn.lower(keys, steers).compile(compiler_options)
+    compiled = fn.lower(keys, steers).compile()
     compile_s = time.perf_counter() - t0
     run_s = math.inf
     for _ in range(repeats):
@@ -229,9 +226,7 @@ def main(args: argparse.Namespace) -> int:
         else:
             budget = MJX_BUDGET if kind == "mjx" else c_budget
             n = _control_steps(batch, phys.substeps, budget)
-            if kind == "mjx":
-                # A fresh process: after MuJoCo's rollout threads have run, an MJX batch of 256 or more
-                # never returned here (every XLA worker idle, the caller waiting; jax 0.10.2).
+            if kind == "mjx":  # in a fresh process: see the module docstring
                 row = run_isolated(bench_closed_loop, kind, batch, n, repeats=1)
             else:
                 row = bench_closed_loop(kind, batch, n)
