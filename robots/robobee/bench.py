@@ -364,8 +364,10 @@ class Brian2Flight:
             g.tau = tau * b2.second
             self.groups.append(g)
         self.synapses, self.pre_index = [], []
-        for (pre, post), mask, w, c in zip(zip(self.groups, self.groups[1:]), (state.mask_ih, state.mask_ho),
-                                           (state.w_ih, state.w_ho), (f(cp.syn_hidden), f(cp.syn_output))):
+        masks = [np.asarray(m, np.float64) for m in (state.mask_ih, state.mask_ho)]
+        weights = [np.asarray(w, np.float64) for w in (state.w_ih, state.w_ho)]
+        for (pre, post), mask, w, c in zip(zip(self.groups, self.groups[1:]), masks, weights,
+                                           (f(cp.syn_hidden), f(cp.syn_output))):
             syn = b2.Synapses(pre, post, "w : 1", on_pre="I_post += c_syn * w", namespace={"c_syn": c})
             i, j = np.nonzero(mask)
             syn.connect(i=i, j=j)
@@ -577,6 +579,7 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
                                     segment_steps)[w])
     dense = []
     for w_syn, mask in zip(weights, (flight.state0.mask_ih, flight.state0.mask_ho)):
+        mask = np.asarray(mask)
         w = np.zeros(mask.shape)
         w[np.nonzero(mask)] = w_syn
         dense.append(w)

@@ -54,6 +54,10 @@ class FlightPlan(NamedTuple):
     waypoints: jax.Array
 
 
+# The weights' means are taken at every WEIGHTS_EVERY-th sample of a Recording.
+WEIGHTS_EVERY = 10
+
+
 class Recording(NamedTuple):
     """A flight sampled every ``record_every`` steps.
 
@@ -63,8 +67,10 @@ class Recording(NamedTuple):
         target: target state, shape (n, 6).
         y_hat: decoded SNN output, units of ``TORQUE_UNIT``, shape (n,).
         y_lqr: the teacher, same units, shape (n,).
-        w_ih_mean: mean input->hidden weight over existing synapses, shape (n,).
-        w_ho_mean: mean hidden->output weight over existing synapses, shape (n,).
+        w_ih_mean: mean input->hidden weight over existing synapses, shape (n,),
+            taken every `WEIGHTS_EVERY` samples and held in between (reading all
+            the weights costs as much as several steps of the event-driven network).
+        w_ho_mean: mean hidden->output weight over existing synapses, shape (n,), as ``w_ih_mean``.
     """
 
     t: jax.Array
@@ -143,14 +149,19 @@ def fly(
         data = jax.tree.map(lambda held, new: jnp.where(i < hold_steps, held, new), data, moved)
         return (data, ctrl), (q, target, y_hat, y_lqr)
 
-    def record(carry, block):
-        carry, (q, target, y_hat, y_lqr) = jax.lax.scan(step, carry, block)
-        ctrl = carry[1]
-        w_ih = jnp.sum(ctrl.w_ih) / jnp.sum(ctrl.mask_ih)
-        w_ho = jnp.sum(ctrl.w_ho) / jnp.sum(ctrl.mask_ho)
-        return carry, (q[-1], target[-1], y_hat[-1], y_lqr[-1], w_ih, w_ho)
+    def weight_means(ctrl):
+        return jnp.stack([jnp.sum(ctrl.w_ih) / jnp.sum(ctrl.mask_ih), jnp.sum(ctrl.w_ho) / jnp.sum(ctrl.mask_ho)])
 
-    carry = (data_at(model, plan.q0), init_controller(config, cparams, key))
+    def record(carry, block):
+        carry, means = carry[:2], carry[2]
+        carry, (q, target, y_hat, y_lqr) = jax.lax.scan(step, carry, block)
+        # The block index is the same for every flight of a batch, so this stays a branch under vmap.
+        sample = (block[0] // record_every) % WEIGHTS_EVERY == 0
+        means = jax.lax.cond(sample, weight_means, lambda _: means, carry[1])
+        return (*carry, means), (q[-1], target[-1], y_hat[-1], y_lqr[-1], means[0], means[1])
+
+    ctrl = init_controller(config, cparams, key)
+    carry = (data_at(model, plan.q0), ctrl, weight_means(ctrl))
     blocks = jnp.arange(n_steps).reshape(-1, record_every)
     _, (q, target, y_hat, y_lqr, w_ih, w_ho) = jax.lax.scan(record, carry, blocks)
     t = (blocks[:, -1] + 1) * dt

@@ -8,6 +8,7 @@ from spikejax.plasticity.base import PlasticityRule
 from spikejax.plasticity.hebbian import RewardHebbianParams
 from spikejax.plasticity.hebbian import RewardHebbianState
 from spikejax.plasticity.hebbian import reward_modulated_hebbian
+from spikejax.plasticity.hebbian import row_increment
 from spikejax.plasticity.supervised import StochasticSupervisedParams
 from spikejax.plasticity.supervised import stochastic_supervised
 
@@ -16,6 +17,7 @@ __all__ = [
     "RewardHebbianParams",
     "RewardHebbianState",
     "reward_modulated_hebbian",
+    "row_increment",
     "StochasticSupervisedParams",
     "stochastic_supervised",
 ]

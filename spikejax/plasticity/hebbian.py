@@ -13,6 +13,7 @@ __all__ = [
     "RewardHebbianParams",
     "RewardHebbianState",
     "reward_modulated_hebbian",
+    "row_increment",
 ]
 
 
@@ -121,10 +122,33 @@ def reward_modulated_hebbian() -> PlasticityRule:
         mask: jax.Array,
     ) -> tuple[jax.Array, RewardHebbianState]:
         del post
-        since = jnp.where(jnp.asarray(pre, bool), 0.0, state.since + params.dt)
-        since = since.astype(state.since.dtype)
-        r = (jnp.sign(error) + state.r) * jnp.exp(-since / params.tau)
-        dw = params.mu * r[:, None] * jnp.asarray(mask, weights.dtype)
-        return dw.astype(weights.dtype), RewardHebbianState(since=since, r=r.astype(state.r.dtype))
+        increment, state = row_increment(params, state, pre, error)
+        dw = increment[:, None] * jnp.asarray(mask, weights.dtype)
+        return dw.astype(weights.dtype), state
 
     return PlasticityRule(init, update)
+
+
+def row_increment(
+    params: RewardHebbianParams, state: RewardHebbianState, pre: jax.Array, error: jax.Array
+) -> tuple[jax.Array, RewardHebbianState]:
+    """Eq. (9)-(10) as one number per presynaptic neuron: ``dw_ij = increment_i * m_ij``.
+
+    The rule moves every synapse leaving neuron ``i`` alike, so a network can keep
+    its weights as `spikejax.synapses.RowWeights` and add this increment to
+    rows, instead of adding the dense ``dw`` of `reward_modulated_hebbian`'s
+    ``update`` (which is built from it).
+
+    Args:
+        params: learning rate, reward time constant and step.
+        state: the traces at the previous step.
+        pre: ``(n_pre,)`` spikes of this step, bool or 0/1.
+        error: scalar ``y - y_hat``.
+
+    Returns:
+        ``(mu * r, state)``: the increment ``(n_pre,)`` and the new traces.
+    """
+    since = jnp.where(jnp.asarray(pre, bool), 0.0, state.since + params.dt)
+    since = since.astype(state.since.dtype)
+    r = (jnp.sign(error) + state.r) * jnp.exp(-since / params.tau)
+    return (params.mu * r).astype(state.r.dtype), RewardHebbianState(since=since, r=r.astype(state.r.dtype))
