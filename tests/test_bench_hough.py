@@ -2,6 +2,8 @@
 
 import argparse
 import csv
+import subprocess
+import sys
 
 import numpy as np
 from skimage.transform import hough_line
@@ -21,7 +23,7 @@ def test_bench_frames_are_the_peers_frames():
 
 
 def test_bench_writes_every_implementation(tmp_path):
-    args = argparse.Namespace(trials=1, out=str(tmp_path), repeats=1)
+    args = argparse.Namespace(trials=1, out=str(tmp_path), repeats=1, cpu_devices=1)
     assert bench_hough.main(args) == 0
     with open(tmp_path / "hough.csv") as f:
         rows = list(csv.DictReader(f))
@@ -56,3 +58,20 @@ def test_modes_agree_on_sparse_slots_and_differ_on_dense_ones():
     assert sparse["sync_spikes"] == sparse["async_spikes"] and sparse["shared"] == 1.0
     dense = bench_hough.mode_difference(jax.tree.map(lambda a: a[None], first))
     assert dense["sync_spikes"] != dense["async_spikes"]
+
+
+def test_bench_splits_the_streams_over_two_cpu_devices(tmp_path):
+    """``--cpu-devices 2``: each spikejax row from batch 2 on is run again over both devices."""
+    run = subprocess.run([sys.executable, "-m", "spikejax.cli", "bench", "hough", "--trials", "2", "--cpu-devices", "2",
+                          "--no-progress", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "2 x cpu" in run.stdout
+    with open(tmp_path / "hough.csv") as f:
+        rows = list(csv.DictReader(f))
+    split = [r for r in rows if r["implementation"].endswith(", 2 devices")]
+    assert {(r["shape"], r["mode"], r["batch"]) for r in split} == {
+        ("line", "sync", "2"), ("circle", "sync", "2"), ("line", "async", "2")}
+    for r in split:
+        one = next(o for o in rows if o["implementation"] == r["implementation"].removesuffix(", 2 devices")
+                   and o["mode"] == r["mode"] and o["batch"] == r["batch"])
+        assert r["frames"] == one["frames"] and r["events"] == one["events"]

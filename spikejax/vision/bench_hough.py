@@ -67,6 +67,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from spikejax.devices import shard_batch
+from spikejax.devices import use_cpu_devices
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
 
@@ -201,32 +203,41 @@ def _batched(tree, batch):
     return jax.tree.map(lambda a: jnp.broadcast_to(a, (batch,) + a.shape), tree)
 
 
-def _spikejax_sync(shape, grid, events, batch, repeats, device):
+def _compiled(fn, devices: int):
+    """``jit(fn)`` on the first device, or split over the first ``devices`` devices."""
+    return jax.jit(fn) if devices == 1 else shard_batch(fn, jax.devices()[:devices])
+
+
+def _on(devices: int) -> str:
+    return "" if devices == 1 else f", {devices} devices"
+
+
+def _spikejax_sync(shape, grid, events, batch, repeats, device, devices=1):
     params = hough.hough_params(8.0, 50.0)
     n_slots = events.x.shape[0]
     times = jnp.arange(1, n_slots + 1, dtype=jnp.float32) * 0.01
-    fn = jax.jit(jax.vmap(lambda e: hough.sync_run(params, grid, e, times)[1]))
+    fn = _compiled(jax.vmap(lambda e: hough.sync_run(params, grid, e, times)[1]), devices)
     streams = _batched(events, batch)
     t = time.perf_counter()
     jax.block_until_ready(fn(streams))
     compile_s = time.perf_counter() - t
     run_s = _time(lambda: fn(streams), repeats)
     n_events = float(events.count().sum()) * batch
-    return _row(shape, f"spikejax {type(grid).__name__} (votes + LIF + inhibition)", "sync", batch, n_slots * batch,
-                n_events, compile_s, run_s, device)
+    return _row(shape, f"spikejax {type(grid).__name__} (votes + LIF + inhibition){_on(devices)}", "sync", batch,
+                n_slots * batch, n_events, compile_s, run_s, device)
 
 
-def _spikejax_async(grid, events, batch, repeats, device):
+def _spikejax_async(grid, events, batch, repeats, device, devices=1):
     params = hough.hough_params(8.0, 50.0)
-    fn = jax.jit(jax.vmap(lambda e: hough.async_run(params, grid, e)))
+    fn = _compiled(jax.vmap(lambda e: hough.async_run(params, grid, e)), devices)
     streams = _batched(jax.tree.map(lambda a: a[:1], events), batch)
     t = time.perf_counter()
     jax.block_until_ready(fn(streams))
     compile_s = time.perf_counter() - t
     run_s = _time(lambda: fn(streams), repeats, min_s=0.0)
     n_events = float(events.count()[0]) * batch
-    return _row("line", "spikejax LineGrid (votes + LIF + inhibition)", "async", batch, batch, n_events, compile_s,
-                run_s, device)
+    return _row("line", f"spikejax LineGrid (votes + LIF + inhibition){_on(devices)}", "async", batch, batch, n_events,
+                compile_s, run_s, device)
 
 
 def mode_difference(events, params=None) -> dict:
@@ -291,13 +302,25 @@ def main(args: argparse.Namespace) -> int:
     Reads ``args.trials`` as the largest batch of streams (default 1024; the
     circle grid, 4 MB of state a stream, stops at 64 streams, the asynchronous
     mode at 256) and ``args.out`` (optional). ``args.repeats`` (optional) sets
-    the timed calls per row (default 5).
+    the timed calls per row (default 5). ``args.cpu_devices`` (default: the
+    machine's cores) is the number of CPU devices JAX presents; with more than
+    one device, every spikejax row from that batch on is also run with the
+    streams split over all devices (`spikejax.devices.shard_batch`).
     """
     largest = int(getattr(args, "trials", None) or 1024)
     if largest < 1:
         raise UserError(f"--trials (the largest batch of streams) must be >= 1, not {largest}")
     repeats = int(getattr(args, "repeats", None) or 5)
+    asked = getattr(args, "cpu_devices", None)
+    try:
+        use_cpu_devices(int(asked or os.cpu_count() or 1))
+    except UserError:
+        if asked:
+            raise
+        # Called from a process where JAX already runs (tests, notebooks): keep its devices.
     device = jax.devices()[0].platform
+    n_dev = jax.device_count()
+    splits = lambda b: [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"{jax.device_count()} x {device}, jax {jax.__version__}")
     line_events, line_images = frames("line")
@@ -310,14 +333,17 @@ def main(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     jobs = [lambda: _peers(line_images, circle_images, line_counts, circle_counts, line_events, repeats)]
+    # Two slots a stream for circles: the circle grid's run time does not depend on the events.
+    two = jax.tree.map(lambda a: a[:2], circle_events)
     for b in _batches(largest):
-        jobs.append(lambda b=b: [_spikejax_sync("line", hough.LineGrid(), line_events, b, repeats, device)])
+        for d in splits(b):
+            jobs.append(lambda b=b, d=d: [_spikejax_sync("line", hough.LineGrid(), line_events, b, repeats, device, d)])
     for b in _batches(min(largest, 64)):
-        # Two slots a stream: the circle grid's run time does not depend on the events.
-        two = jax.tree.map(lambda a: a[:2], circle_events)
-        jobs.append(lambda b=b, two=two: [_spikejax_sync("circle", hough.CircleGrid(), two, b, repeats, device)])
+        for d in splits(b):
+            jobs.append(lambda b=b, d=d: [_spikejax_sync("circle", hough.CircleGrid(), two, b, repeats, device, d)])
     for b in _batches(min(largest, 256)):
-        jobs.append(lambda b=b: [_spikejax_async(hough.LineGrid(), line_events, b, repeats, device)])
+        for d in splits(b):
+            jobs.append(lambda b=b, d=d: [_spikejax_async(hough.LineGrid(), line_events, b, repeats, device, d)])
     rows = []
     for job in tqdm(jobs, desc="hough bench", disable=getattr(args, "no_progress", False)):
         rows.extend(job())
@@ -350,12 +376,13 @@ def _print(rows):
                                     and r["implementation"].startswith("spikejax")), key=lambda r: r["events_per_s"])
     peer = lambda name: next(r for r in rows if r["implementation"].startswith(name))
     line, circle, asyn = best("line", "sync"), best("circle", "sync"), best("line", "async")
-    print("\nmeasured in this run (ratios to the peer on the same frames):")
-    print(f"  line, sync:    {line['frames_per_s']:.0f} frames/s at batch {line['batch']} = "
+    where = lambda r: f"batch {r['batch']}" + (r["implementation"].split(")")[-1] or ", 1 device")
+    print("\nmeasured in this run (ratios to the peer on the same frames; the best row):")
+    print(f"  line, sync:    {line['frames_per_s']:.0f} frames/s at {where(line)} = "
           f"{line['frames_per_s'] / peer('skimage hough_line')['frames_per_s']:.2f} x skimage hough_line")
-    print(f"  circle, sync:  {circle['frames_per_s']:.1f} frames/s at batch {circle['batch']} = "
+    print(f"  circle, sync:  {circle['frames_per_s']:.1f} frames/s at {where(circle)} = "
           f"{circle['frames_per_s'] / peer('skimage hough_circle')['frames_per_s']:.2f} x skimage hough_circle")
-    print(f"  line, async:   {asyn['events_per_s'] / 1e6:.3f} M events/s at batch {asyn['batch']} = "
+    print(f"  line, async:   {asyn['events_per_s'] / 1e6:.3f} M events/s at {where(asyn)} = "
           f"{asyn['events_per_s'] / peer('NumPy per-event')['events_per_s']:.1f} x the NumPy per-event loop")
     print("\nTable 1 of the paper (whole pipe tracker, frames/s):")
     for case, hw, cpu, gpu in TABLE1:
