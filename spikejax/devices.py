@@ -5,8 +5,8 @@ gathers among them), so a ``jit(vmap(f))`` uses one core whatever the batch.
 JAX can present the cores as separate CPU devices (``jax_num_cpu_devices``, set
 before JAX starts its backends); `shard_batch` then gives each device an equal
 share of the batch with ``jax.shard_map``. On the 2-core CPU this made the
-synchronous Hough line detector 1.4-1.6x the speed of one device at 64
-streams (docs/BENCHMARKS.md). The same code spreads a batch over GPUs.
+synchronous Hough line detector about twice as fast at 64 streams
+(docs/BENCHMARKS.md). The same code spreads a batch over GPUs.
 
 Results do not depend on the number of devices: each batch member is computed
 alone, and a batch that does not divide evenly is padded with copies of its

@@ -16,7 +16,7 @@ instead of ``n_pre x n_post`` weights (`add_to_rows`).
 A layer's input current ``sum_i s_i w_ij`` then needs only the rows of the
 neurons that spiked, a few percent of them in a step (`propagate`); the dense
 vector-matrix product reads every weight. On a CPU, for the RoboBee's
-200-100-50 network under ``vmap``, this makes the closed-loop step about 2.7x
+200-100-50 network under ``vmap``, this made the closed-loop flights about 3x
 faster from 256 flights on (docs/BENCHMARKS.md).
 
 Absent synapses are NaN in ``w0``, so that one gathered row carries both the
