@@ -75,3 +75,4 @@ def test_bench_splits_the_streams_over_two_cpu_devices(tmp_path):
         one = next(o for o in rows if o["implementation"] == r["implementation"].removesuffix(", 2 devices")
                    and o["mode"] == r["mode"] and o["batch"] == r["batch"])
         assert r["frames"] == one["frames"] and r["events"] == one["events"]
+        assert (r["devices"], one["devices"]) == ("2", "1")

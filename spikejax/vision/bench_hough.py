@@ -84,7 +84,7 @@ TABLE1 = [
 CAPACITY = 2304
 N_FRAMES = 8
 COLUMNS = ["shape", "implementation", "mode", "batch", "frames", "events", "compile_s", "run_s", "frames_per_s",
-           "events_per_s", "device"]
+           "events_per_s", "device", "devices"]
 
 
 def frames(shape: str, n: int = N_FRAMES) -> tuple:
@@ -123,10 +123,10 @@ def _time(fn, repeats: int, min_s: float = 0.3) -> float:
     return float(np.median(times))
 
 
-def _row(shape, impl, mode, batch, n_frames, n_events, compile_s, run_s, device="cpu"):
+def _row(shape, impl, mode, batch, n_frames, n_events, compile_s, run_s, device="cpu", devices=1):
     return dict(shape=shape, implementation=impl, mode=mode, batch=batch, frames=n_frames, events=n_events,
                 compile_s=compile_s, run_s=run_s, frames_per_s=n_frames / run_s, events_per_s=n_events / run_s,
-                device=device)
+                device=device, devices=devices)
 
 
 def _peer(shape, impl, fn, images, counts, repeats):
@@ -203,11 +203,6 @@ def _batched(tree, batch):
     return jax.tree.map(lambda a: jnp.broadcast_to(a, (batch,) + a.shape), tree)
 
 
-def _compiled(fn, devices: int):
-    """``jit(fn)`` on the first device, or split over the first ``devices`` devices."""
-    return jax.jit(fn) if devices == 1 else shard_batch(fn, jax.devices()[:devices])
-
-
 def _on(devices: int) -> str:
     return "" if devices == 1 else f", {devices} devices"
 
@@ -216,7 +211,7 @@ def _spikejax_sync(shape, grid, events, batch, repeats, device, devices=1):
     params = hough.hough_params(8.0, 50.0)
     n_slots = events.x.shape[0]
     times = jnp.arange(1, n_slots + 1, dtype=jnp.float32) * 0.01
-    fn = _compiled(jax.vmap(lambda e: hough.sync_run(params, grid, e, times)[1]), devices)
+    fn = shard_batch(jax.vmap(lambda e: hough.sync_run(params, grid, e, times)[1]), jax.devices()[:devices])
     streams = _batched(events, batch)
     t = time.perf_counter()
     jax.block_until_ready(fn(streams))
@@ -224,12 +219,12 @@ def _spikejax_sync(shape, grid, events, batch, repeats, device, devices=1):
     run_s = _time(lambda: fn(streams), repeats)
     n_events = float(events.count().sum()) * batch
     return _row(shape, f"spikejax {type(grid).__name__} (votes + LIF + inhibition){_on(devices)}", "sync", batch,
-                n_slots * batch, n_events, compile_s, run_s, device)
+                n_slots * batch, n_events, compile_s, run_s, device, devices)
 
 
 def _spikejax_async(grid, events, batch, repeats, device, devices=1):
     params = hough.hough_params(8.0, 50.0)
-    fn = _compiled(jax.vmap(lambda e: hough.async_run(params, grid, e)), devices)
+    fn = shard_batch(jax.vmap(lambda e: hough.async_run(params, grid, e)), jax.devices()[:devices])
     streams = _batched(jax.tree.map(lambda a: a[:1], events), batch)
     t = time.perf_counter()
     jax.block_until_ready(fn(streams))
@@ -237,7 +232,7 @@ def _spikejax_async(grid, events, batch, repeats, device, devices=1):
     run_s = _time(lambda: fn(streams), repeats, min_s=0.0)
     n_events = float(events.count()[0]) * batch
     return _row("line", f"spikejax LineGrid (votes + LIF + inhibition){_on(devices)}", "async", batch, batch, n_events,
-                compile_s, run_s, device)
+                compile_s, run_s, device, devices)
 
 
 def mode_difference(events, params=None) -> dict:
@@ -322,7 +317,7 @@ def main(args: argparse.Namespace) -> int:
     n_dev = jax.device_count()
     splits = lambda b: [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"{jax.device_count()} x {device}, jax {jax.__version__}")
+          f"{n_dev} x {device}, jax {jax.__version__}")
     line_events, line_images = frames("line")
     circle_events, circle_images = frames("circle")
     line_counts = np.asarray(line_events.count())
@@ -376,7 +371,7 @@ def _print(rows):
                                     and r["implementation"].startswith("spikejax")), key=lambda r: r["events_per_s"])
     peer = lambda name: next(r for r in rows if r["implementation"].startswith(name))
     line, circle, asyn = best("line", "sync"), best("circle", "sync"), best("line", "async")
-    where = lambda r: f"batch {r['batch']}" + (r["implementation"].split(")")[-1] or ", 1 device")
+    where = lambda r: f"batch {r['batch']}, {r['devices']} device" + ("s" if r["devices"] > 1 else "")
     print("\nmeasured in this run (ratios to the peer on the same frames; the best row):")
     print(f"  line, sync:    {line['frames_per_s']:.0f} frames/s at {where(line)} = "
           f"{line['frames_per_s'] / peer('skimage hough_line')['frames_per_s']:.2f} x skimage hough_line")
