@@ -16,7 +16,7 @@ Per step, at time ``t``:
 4. The robot gets the altitude controller's lift and, as the lateral torque,
    ``y_hat`` (SNN flight) or ``y`` (LQR flight); during the hold the state is
    held at ``q0`` (the paper's first 500 ms, which lets the decoder's trace
-   build up) and the physics does not step.
+   build up): the hold is a scan of its own that does not step the physics.
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ def fly(
         use_snn: bool scalar: who applies the lateral torque.
         hold_steps: steps of the initial hold (static; 5000 = 500 ms).
         segment_steps: steps spent on each waypoint (static).
-        record_every: sampling of the recording (static).
+        record_every: sampling of the recording (static); ``hold_steps`` and ``segment_steps`` are multiples of it.
 
     Returns:
         The flight, sampled every ``record_every`` steps.
@@ -129,13 +129,14 @@ def fly(
     model = load_model()
     n_waypoints = plan.waypoints.shape[0]
     n_steps = hold_steps + n_waypoints * segment_steps
-    if n_steps % record_every:
-        raise ValueError("the flight's length must be a multiple of record_every")
+    if hold_steps % record_every or segment_steps % record_every:
+        raise ValueError(f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
+                         f"record_every ({record_every})")
     lat = jnp.asarray(LATERAL)
     targets = jnp.concatenate([plan.q0[None], plan.waypoints])
     dt = cparams.dt
 
-    def step(carry, i):
+    def step(carry, i, moving):
         data, ctrl = carry
         q = state_of(data)
         segment = jnp.where(i < hold_steps, 0, 1 + (i - hold_steps) // segment_steps)
@@ -143,18 +144,18 @@ def fly(
         # The teacher within the actuator's range: the SNN cannot be asked for more torque than exists.
         y_lqr = jnp.clip(lateral_lqr(K, q, target) / TORQUE_UNIT, -1.0, 1.0)
         ctrl, y_hat = controller_step(config, cparams, ctrl, q[lat] - target[lat], y_lqr, jnp.float32(1.0))
-        torque = jnp.where(use_snn, jnp.clip(y_hat, -1.0, 1.0), y_lqr) * TORQUE_UNIT
-        lift = altitude_control(altitude, q, target, robot)
-        moved = physics_step(model, data, robot, lift, torque)
-        data = jax.tree.map(lambda held, new: jnp.where(i < hold_steps, held, new), data, moved)
+        if moving:
+            torque = jnp.where(use_snn, jnp.clip(y_hat, -1.0, 1.0), y_lqr) * TORQUE_UNIT
+            lift = altitude_control(altitude, q, target, robot)
+            data = physics_step(model, data, robot, lift, torque)
         return (data, ctrl), (q, target, y_hat, y_lqr)
 
     def weight_means(ctrl):
         return jnp.stack([jnp.sum(ctrl.w_ih) / jnp.sum(ctrl.mask_ih), jnp.sum(ctrl.w_ho) / jnp.sum(ctrl.mask_ho)])
 
-    def record(carry, block):
+    def record(carry, block, moving):
         carry, means = carry[:2], carry[2]
-        carry, (q, target, y_hat, y_lqr) = jax.lax.scan(step, carry, block)
+        carry, (q, target, y_hat, y_lqr) = jax.lax.scan(lambda c, i: step(c, i, moving), carry, block)
         # The block index is the same for every flight of a batch, so this stays a branch under vmap.
         sample = (block[0] // record_every) % WEIGHTS_EVERY == 0
         means = jax.lax.cond(sample, weight_means, lambda _: means, carry[1])
@@ -163,6 +164,10 @@ def fly(
     ctrl = init_controller(config, cparams, key)
     carry = (data_at(model, plan.q0), ctrl, weight_means(ctrl))
     blocks = jnp.arange(n_steps).reshape(-1, record_every)
-    _, (q, target, y_hat, y_lqr, w_ih, w_ho) = jax.lax.scan(record, carry, blocks)
+    n_hold = hold_steps // record_every
+    # The hold and the flight as two scans: during the hold the physics is not stepped at all.
+    carry, held = jax.lax.scan(lambda c, b: record(c, b, False), carry, blocks[:n_hold])
+    _, flown = jax.lax.scan(lambda c, b: record(c, b, True), carry, blocks[n_hold:])
+    q, target, y_hat, y_lqr, w_ih, w_ho = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), held, flown)
     t = (blocks[:, -1] + 1) * dt
     return Recording(t=t, q=q, target=target, y_hat=y_hat, y_lqr=y_lqr, w_ih_mean=w_ih, w_ho_mean=w_ho)
