@@ -64,7 +64,7 @@ def _build_parser() -> argparse.ArgumentParser:
     be.add_argument("--out", default=None, help="write the figures as CSV here")
     be.add_argument("--quick", action="store_true", help="a short run at small sizes (snake)")
     be.add_argument("--cpu-devices", type=int, default=None,
-                    help="CPU devices JAX presents (hough; default: one per core, the streams split over them)")
+                    help="CPU devices JAX presents (hough, robobee; default: one per core, the batch split over them)")
     be.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
     det = sub.add_parser("detect", help="detect shapes in an event recording")

@@ -16,6 +16,7 @@ last member, which are dropped from the result.
 from __future__ import annotations
 
 import math
+import os
 from typing import Callable
 
 import jax
@@ -24,7 +25,7 @@ import numpy as np
 
 from spikejax.errors import UserError
 
-__all__ = ["use_cpu_devices", "shard_batch"]
+__all__ = ["use_cpu_devices", "cpu_devices_for_run", "shard_batch"]
 
 
 def use_cpu_devices(n: int) -> None:
@@ -44,6 +45,23 @@ def use_cpu_devices(n: int) -> None:
             raise UserError(
                 f"JAX already started with {have} CPU device(s); set the count ({n}) before anything runs on JAX"
             ) from e
+
+
+def cpu_devices_for_run(asked: int | None = None) -> int:
+    """The CPU devices a benchmark or run uses: ``asked``, else one per core; returns the count JAX presents.
+
+    A process where JAX already started (a test, a notebook) keeps its devices
+    when nothing was asked.
+
+    Raises:
+        UserError: if ``asked`` is set and JAX already started with another count.
+    """
+    try:
+        use_cpu_devices(int(asked or os.cpu_count() or 1))
+    except UserError:
+        if asked:
+            raise
+    return jax.device_count()
 
 
 def shard_batch(fn: Callable, devices=None) -> Callable:

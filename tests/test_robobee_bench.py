@@ -166,7 +166,8 @@ def test_large_batches_time_shorter_flights():
 
 
 def test_main_writes_the_closed_loop_table(tmp_path, capsys):
-    args = argparse.Namespace(trials=1, out=str(tmp_path), duration=DURATION, brian2_target="numpy", network=False)
+    args = argparse.Namespace(trials=1, out=str(tmp_path), duration=DURATION, brian2_target="numpy", network=False,
+                              cpu_devices=1)
     assert bench.main(args) == 0
     out = capsys.readouterr().out
     assert "| Brian2 runtime (numpy) + network_operation | 1 |" in out
@@ -175,3 +176,42 @@ def test_main_writes_the_closed_loop_table(tmp_path, capsys):
     assert [(r["impl"].split()[0], int(r["batch"])) for r in rows] == [("Brian2", 1), ("spikejax", 1)]
     assert float(rows[0]["x_brian2"]) == 1.0
     assert all(float(r["flights_per_s"]) > 0 for r in rows)
+
+
+_TWO_DEVICES = """
+import argparse, csv, sys
+import numpy as np
+from spikejax.devices import use_cpu_devices
+use_cpu_devices(2)
+from robots.robobee import bench
+one = bench.run_spikejax_flights(3, {duration}, {seed}, devices=1)
+two = bench.run_spikejax_flights(3, {duration}, {seed}, devices=2)  # 3 flights over 2 devices: padded to 4
+assert two["devices"] == 2 and two["impl"].endswith(", 2 devices"), two["impl"]
+for a, b in zip(one["recording"], two["recording"]):
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-7)
+out = sys.argv[1]
+bench.main(argparse.Namespace(trials=2, out=out, duration={duration}, brian2_target="numpy", network=False))
+with open(out + "/bench_robobee.csv") as f:
+    rows = list(csv.DictReader(f))
+print([(r["impl"], r["batch"], r["devices"], r["x_brian2"], r["x_brian2_all_cores"]) for r in rows])
+"""
+
+
+def test_two_cpu_devices_fly_the_same_flights_and_brian2_runs_on_both_cores(tmp_path):
+    """Flights split over 2 CPU devices equal those on one; the table adds Brian2 on both cores and split rows."""
+    import ast
+    import subprocess
+    import sys
+
+    script = _TWO_DEVICES.format(duration=DURATION, seed=SEED)
+    run = subprocess.run([sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    rows = ast.literal_eval(run.stdout.strip().splitlines()[-1])
+    assert [(impl.split()[0], batch, devices) for impl, batch, devices, _, _ in rows] == [
+        ("Brian2", "1", "1"), ("Brian2", "2", "1"), ("spikejax", "1", "1"), ("spikejax", "2", "1"),
+        ("spikejax", "2", "2")]
+    assert rows[1][0].endswith("2 processes at once") and rows[4][0].endswith(", 2 devices")
+    # Each row against one Brian2 flight and against two side by side.
+    assert float(rows[0][3]) == 1.0 and float(rows[1][4]) == 1.0
+    for _, _, _, x_one, x_all in rows:
+        assert float(x_all) == pytest.approx(float(x_one) * float(rows[0][4]))

@@ -50,6 +50,19 @@ def test_propagate_equals_the_dense_product(n_spikes):
     np.testing.assert_allclose(got, spikes.astype(np.float32) @ np.asarray(synapses.dense(rows)), atol=1e-5)
 
 
+@pytest.mark.parametrize("spiking", [[0, 31, 32, 63, 64, 95, 96, 99], [99], [31, 32], list(range(100))])
+def test_propagate_finds_spikes_across_32_bit_words(spiking):
+    """Spikes are packed 32 to a word: the first and last bit of each word, and a last partial word."""
+    rng = np.random.default_rng(3)
+    w, mask = _network(rng, n_pre=100)
+    rows = synapses.row_weights(jnp.asarray(w, jnp.float32), jnp.asarray(mask))
+    spikes = np.zeros(100, bool)
+    spikes[spiking] = True
+    for max_rows in (1, 3, 8, 100):
+        got = synapses.propagate(rows, jnp.asarray(spikes), max_rows)
+        np.testing.assert_allclose(got, spikes.astype(np.float32) @ w.astype(np.float32), atol=1e-4)
+
+
 def test_propagate_under_vmap_with_different_counts():
     rng = np.random.default_rng(2)
     w, mask = _network(rng)

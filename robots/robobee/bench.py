@@ -75,9 +75,11 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import multiprocessing
 import os
 import platform
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -98,6 +100,9 @@ from robots.robobee.lqr import lateral_gain
 from robots.robobee.params import default_params
 from robots.robobee.params import max_lift
 from robots.robobee.params import randomize
+from spikejax.devices import cpu_devices_for_run
+from spikejax.devices import shard_batch
+from spikejax.errors import UserError
 
 __all__ = [
     "BATCHES",
@@ -108,6 +113,7 @@ __all__ = [
     "main",
     "network_key",
     "run_brian2_closed_loop",
+    "run_brian2_on_all_cores",
     "run_spikejax_flights",
     "timed_duration",
 ]
@@ -229,11 +235,14 @@ def _row(impl, batch, flight_s, timed_s, build_s, run_s, reached=(math.nan, math
 
 
 def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, *, randomize_robots: bool = False,
-                         step_budget: int = STEP_BUDGET, repeats: int = 1) -> dict:
+                         step_budget: int = STEP_BUDGET, repeats: int = 1, devices: int = 1) -> dict:
     """``batch`` closed-loop flights of ``duration`` seconds as one ``jax.jit(jax.vmap(fly))``.
 
     The program is compiled ahead (``lower(...).compile()``, ``build_or_compile_s``)
-    and run to completion ``repeats`` times (``run_s``: the fastest). If
+    and run to completion ``repeats`` times (``run_s``: the fastest). With
+    ``devices > 1`` the flights are split evenly over the first ``devices`` of
+    ``jax.devices()`` (`spikejax.devices.shard_batch`: each CPU device runs on
+    its own core), and the compile time is the first call's time less ``run_s``. If
     ``batch`` whole flights exceed ``step_budget`` flight-steps, the flights
     timed are shortened to fit it (same 20 % hold and two segments, at least
     0.05 s) and the throughputs extrapolated to ``duration``: the scan's steps
@@ -248,9 +257,10 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
             the nominal one.
         step_budget: flight-steps one timed run may take.
         repeats: timed runs.
+        devices: devices the batch is split over (1: a plain ``jax.jit``).
 
     Returns:
-        A row (`ROW_FIELDS`); ``reached_q1``/``reached_q2`` are the fractions of
+        A row (`ROW_FIELDS`, and ``devices``); ``reached_q1``/``reached_q2`` are the fractions of
         flights within 5 mm of each waypoint at the end of its segment (NaN
         when the flights were shortened), ``recording`` the flights'
         `robots.robobee.flight.Recording` (NumPy).
@@ -263,21 +273,31 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
         return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, key, jnp.bool_(True),
                    hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY)
 
-    fn = jax.jit(jax.vmap(one))
-    t0 = time.perf_counter()
-    compiled = fn.lower(setup.robots, setup.keys).compile()
-    compile_s = time.perf_counter() - t0
+    if devices > jax.device_count():
+        raise UserError(f"{devices} devices asked, JAX presents {jax.device_count()}")
+    if devices == 1:
+        t0 = time.perf_counter()
+        compiled = jax.jit(jax.vmap(one)).lower(setup.robots, setup.keys).compile()
+        compile_s = time.perf_counter() - t0
+    else:
+        compiled = shard_batch(jax.vmap(one), jax.devices()[:devices])
+        t0 = time.perf_counter()
+        jax.block_until_ready(compiled(setup.robots, setup.keys))
+        first_s = time.perf_counter() - t0
     run_s = math.inf
     for _ in range(repeats):
         t0 = time.perf_counter()
         rec = jax.block_until_ready(compiled(setup.robots, setup.keys))
         run_s = min(run_s, time.perf_counter() - t0)
+    if devices > 1:
+        compile_s = max(first_s - run_s, 0.0)
     rec = jax.tree.map(np.asarray, rec)
     reached = (math.nan, math.nan)
     if math.isclose(timed, duration, abs_tol=DT / 2):
         reached = _reached(rec.t[0], rec.q, setup.plan, hold_steps, segment_steps)
     impl = "spikejax jit(vmap(fly))" + (" randomized robots" if randomize_robots else "")
-    return _row(impl, batch, duration, timed, compile_s, run_s, reached, recording=rec)
+    impl += f", {devices} devices" if devices > 1 else ""
+    return _row(impl, batch, duration, timed, compile_s, run_s, reached, recording=rec, devices=devices)
 
 
 # ----------------------------------------------------------------- Brian2
@@ -503,7 +523,7 @@ class Brian2Flight:
 
 def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
                            flight_s: float = FLIGHT_S, scale_plan: bool = True, learn: bool = True,
-                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY) -> dict:
+                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY, barrier=None) -> dict:
     """One closed-loop flight in Brian2's runtime mode (`Brian2Flight`), timed on ``duration`` simulated seconds.
 
     The network is spikejax's flight 0 of the same ``seed``. A first run of
@@ -528,6 +548,8 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
         learn: apply Eq. (10).
         use_snn: the SNN steers (else the teacher).
         warmup_steps: steps of the code-generating first run.
+        barrier: if given (a ``multiprocessing`` barrier), waited on just before the
+            timed run, so that flights in several processes are timed together.
 
     Returns:
         A row (`ROW_FIELDS`) with ``recording`` (`Brian2Flight.recording`),
@@ -557,6 +579,8 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
             flight.run(warmup_steps)
         build_s = time.perf_counter() - t0
         flight.reset()
+        if barrier is not None:
+            barrier.wait()
         t0 = time.perf_counter()
         flight.run(n_steps)
         run_s = time.perf_counter() - t0
@@ -587,6 +611,31 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
                 w_ih=dense[0], w_ho=dense[1], op_s=op_s, prepare_s=prepare_s)
 
 
+def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
+                            flight_s: float = FLIGHT_S) -> dict:
+    """``processes`` Brian2 flights at once, one process each: what a Brian2 user gets from that many cores.
+
+    Brian2's runtime mode runs one flight on one core; a user with several
+    cores runs several flights side by side. Each process builds its flight
+    (`run_brian2_closed_loop`) and then all start their timed run together
+    (a barrier); the row's ``run_s`` is the slowest one's, so its flights/s is
+    the aggregate of all of them.
+
+    Returns:
+        A row (`ROW_FIELDS`) with ``batch = processes``; ``build_or_compile_s`` is the slowest build.
+    """
+    context = multiprocessing.get_context("spawn")
+    with context.Manager() as manager:
+        barrier = manager.Barrier(processes)
+        with ProcessPoolExecutor(processes, mp_context=context) as pool:
+            futures = [pool.submit(run_brian2_closed_loop, duration, seed, target, flight_s=flight_s, barrier=barrier)
+                       for _ in range(processes)]
+            rows = [f.result() for f in futures]
+    impl = f"{rows[0]['impl']}, {processes} processes at once"
+    return _row(impl, processes, flight_s, rows[0]["timed_s"], max(r["build_or_compile_s"] for r in rows),
+                max(r["run_s"] for r in rows), (rows[0]["reached_q1"], rows[0]["reached_q2"]))
+
+
 # ----------------------------------------------------------------- CLI
 
 
@@ -606,26 +655,37 @@ def main(args: argparse.Namespace) -> int:
     table), ``duration`` (simulated seconds of a spikejax flight, default 2.5),
     ``seed`` (default 0), ``repeats`` (timed spikejax runs per row, the fastest
     kept; default 1), ``randomize`` (also fly randomized robots at the largest
-    batch), ``brian2_target`` (``"cython"``, the default, or ``"numpy"``) and
-    ``network`` (False skips the network-alone table). Brian2 runs in a fresh
-    process of its own (`run_isolated`), one flight on one core;
-    spikejax's batch uses every core XLA gives it.
+    batch), ``brian2_target`` (``"cython"``, the default, or ``"numpy"``),
+    ``network`` (False skips the network-alone table) and ``cpu_devices`` (the
+    CPU devices JAX presents, default one per core; set before JAX starts).
+
+    Brian2 runs in fresh processes of its own (`run_isolated`): one flight on
+    one core (the paper's setup, the ``x Brian2`` reference), then as many
+    flights side by side as there are devices (`run_brian2_on_all_cores`, the
+    ``x Brian2 on all cores`` reference). Each spikejax batch runs on one
+    device, and, from a batch of one flight per device on, also split over all devices.
     """
+    n_dev = cpu_devices_for_run(getattr(args, "cpu_devices", None))
     duration = float(getattr(args, "duration", None) or FLIGHT_S)
     seed = int(getattr(args, "seed", None) or 0)
     repeats = int(getattr(args, "repeats", None) or 1)
     batches = _batches(getattr(args, "trials", None))
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"{jax.device_count()} x {jax.devices()[0].platform}, jax {jax.__version__}")
+          f"{n_dev} x {jax.devices()[0].platform}, jax {jax.__version__}")
     hold, segment = flight_steps(duration)
     print(f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "
           f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
           f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
     brian2_target = getattr(args, "brian2_target", None) or "cython"
     runs = [lambda: run_isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration)]
-    runs += [lambda b=b: run_spikejax_flights(b, duration, seed, repeats=repeats) for b in batches]
+    if n_dev > 1:
+        runs.append(lambda: run_brian2_on_all_cores(n_dev, duration, seed, brian2_target, flight_s=duration))
+    for b in batches:
+        for d in [1] + ([n_dev] if n_dev > 1 and b >= n_dev else []):
+            runs.append(lambda b=b, d=d: run_spikejax_flights(b, duration, seed, repeats=repeats, devices=d))
     if getattr(args, "randomize", False):
-        runs.append(lambda: run_spikejax_flights(max(batches), duration, seed, randomize_robots=True, repeats=repeats))
+        runs.append(lambda: run_spikejax_flights(max(batches), duration, seed, randomize_robots=True, repeats=repeats,
+                                                 devices=n_dev))
     rows = []
     for run in runs:
         try:
@@ -638,27 +698,33 @@ def main(args: argparse.Namespace) -> int:
                  f"{r['prepare_s']:.2f} s" if "op_s" in r else "")
         print(f"  {r['impl']}, batch {r['batch']}: {r['flights_per_s']:.3g} flights/s (timed {r['timed_s']:g} s "
               f"per flight, run {r['run_s']:.2f} s{extra})", flush=True)
-    brian2 = next((r["flights_per_s"] for r in rows if r["impl"].startswith("Brian2")), math.nan)
+    brian2 = [r for r in rows if r["impl"].startswith("Brian2")]
+    one = brian2[0]["flights_per_s"] if brian2 else math.nan
+    every = brian2[-1]["flights_per_s"] if brian2 else math.nan
     for r in rows:
-        r["x_brian2"] = r["flights_per_s"] / brian2
+        r["x_brian2"] = r["flights_per_s"] / one
+        r["x_brian2_all_cores"] = r["flights_per_s"] / every
     print()
     print("| implementation | batch | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
-          "simulated s / s | neuron updates/s | x Brian2 | reached q1, q2 |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          f"simulated s / s | neuron updates/s | x Brian2 | x Brian2 on {n_dev} cores | reached q1, q2 |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         reached = "-" if math.isnan(r["reached_q1"]) else f"{r['reached_q1']:.0%}, {r['reached_q2']:.0%}"
         print(f"| {r['impl']} | {r['batch']} | {r['build_or_compile_s']:.2f} | {r['timed_s'] * r['batch']:g} | "
               f"{r['run_s']:.2f} | {r['flights_per_s']:.4g} | {r['sim_s_per_wall_s']:.3g} | "
-              f"{r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | {reached} |")
+              f"{r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | {r['x_brian2_all_cores']:.1f} | "
+              f"{reached} |")
     print(f"(flights of {duration:g} s; timed: simulated seconds actually run (flights x timed length), the "
           "throughputs extrapolated from them; run: the fastest of "
           f"{repeats}; reached: within {REACHED_M * 1e3:g} mm of each waypoint at the end of its leg; Brian2 flies "
-          "one flight on one core)")
+          f"one flight on one core, or {n_dev} side by side in {n_dev} processes; spikejax rows on one device unless "
+          "they say so)")
     if getattr(args, "out", None):
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         with open(out / "bench_robobee.csv", "w", newline="") as file:
-            writer = csv.DictWriter(file, fieldnames=[*ROW_FIELDS, "x_brian2"], extrasaction="ignore")
+            writer = csv.DictWriter(file, fieldnames=[*ROW_FIELDS, "devices", "x_brian2", "x_brian2_all_cores"],
+                                    extrasaction="ignore", restval=1)
             writer.writeheader()
             writer.writerows(rows)
     if getattr(args, "network", True) is not False:

@@ -68,7 +68,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spikejax.devices import shard_batch
-from spikejax.devices import use_cpu_devices
+from spikejax.devices import cpu_devices_for_run
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
 
@@ -306,15 +306,8 @@ def main(args: argparse.Namespace) -> int:
     if largest < 1:
         raise UserError(f"--trials (the largest batch of streams) must be >= 1, not {largest}")
     repeats = int(getattr(args, "repeats", None) or 5)
-    asked = getattr(args, "cpu_devices", None)
-    try:
-        use_cpu_devices(int(asked or os.cpu_count() or 1))
-    except UserError:
-        if asked:
-            raise
-        # Called from a process where JAX already runs (tests, notebooks): keep its devices.
+    n_dev = cpu_devices_for_run(getattr(args, "cpu_devices", None))
     device = jax.devices()[0].platform
-    n_dev = jax.device_count()
     splits = lambda b: [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"{n_dev} x {device}, jax {jax.__version__}")
