@@ -32,6 +32,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax import bits
+
 __all__ = ["RowWeights", "row_weights", "add_to_rows", "dense", "connected", "propagate"]
 
 
@@ -122,10 +124,10 @@ def propagate(rows: RowWeights, spikes: jax.Array, max_rows: int = 24) -> jax.Ar
         raise ValueError(f"max_rows must be >= 1, got {max_rows!r}")
     n_pre = rows.w0.shape[0]
     k = min(int(max_rows), n_pre)
-    words = _spike_words(spikes)
+    words = bits.pack(spikes)
 
     def gathered(words):
-        idx, words = _take_spikes(words, k, n_pre)
+        idx, words = bits.take_lowest(words, k, n_pre)
         take = lambda a, fill: a.at[idx].get(mode="fill", fill_value=fill)  # idx n_pre: no spike left
         part = _rows_of(take(rows.w0, jnp.nan), take(rows.shift, 0.0), take(rows.low, 0.0), take(rows.high, 0.0))
         return part.sum(0), words
@@ -137,31 +139,3 @@ def propagate(rows: RowWeights, spikes: jax.Array, max_rows: int = 24) -> jax.Ar
 
     total, _ = jax.lax.while_loop(lambda c: jnp.any(c[1] != 0), more, gathered(words))
     return total
-
-
-def _spike_words(spikes: jax.Array) -> jax.Array:
-    """The spikes as bits, neuron ``i`` at bit ``i % 32`` of word ``i // 32``: uint32 ``(ceil(n / 32),)``."""
-    spiked = (jnp.asarray(spikes) != 0).astype(jnp.uint32)
-    n = spiked.shape[0]
-    n_words = -(-n // 32)
-    bits = jnp.zeros(n_words * 32, jnp.uint32).at[:n].set(spiked).reshape(n_words, 32)
-    return jnp.sum(bits << jnp.arange(32, dtype=jnp.uint32), axis=1, dtype=jnp.uint32)
-
-
-def _take_spikes(words: jax.Array, k: int, n: int) -> tuple[jax.Array, jax.Array]:
-    """The indices of the ``k`` lowest set bits of ``words`` (``n`` past the last one) and the words without them.
-
-    ``k`` unrolled rounds over a handful of words: on a CPU, about a quarter of
-    the cost of ``lax.top_k`` over the ``n`` spikes, which XLA runs as a partial sort.
-    """
-    lanes = jnp.arange(words.shape[0])
-    idx = []
-    for _ in range(k):
-        first = jnp.argmax(words != 0)
-        this = lanes == first
-        word = jnp.sum(jnp.where(this, words, 0), dtype=jnp.uint32)
-        lowest = word & (~word + jnp.uint32(1))  # word & -word
-        bit = 31 - jax.lax.clz(lowest).astype(jnp.int32)
-        idx.append(jnp.where(word != 0, first.astype(jnp.int32) * 32 + bit, n))
-        words = jnp.where(this, word & (word - jnp.uint32(1)), words)
-    return jnp.stack(idx), words
