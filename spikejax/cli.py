@@ -56,6 +56,8 @@ def _build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", required=True, help="output directory (results table + metadata)")
     sw.add_argument("--chunk-size", type=int, default=None, help="trials per compiled batch")
     sw.add_argument("--seeds", type=int, default=None, help="override the number of seeds")
+    sw.add_argument("--cpu-devices", type=int, default=None,
+                    help="present the CPU as N devices and split each chunk over them (default: JAX's devices as they are)")
     sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
     be = sub.add_parser("bench", help="measure speed against the peers (compile time apart)")

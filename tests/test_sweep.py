@@ -252,6 +252,30 @@ def test_resume_after_sigkill_gives_the_uninterrupted_table(tmp_path):
     assert not list(out.rglob("*.tmp"))
 
 
+def test_chunks_split_over_two_cpu_devices_give_the_same_table(tmp_path):
+    """``--cpu-devices 2``: chunks of 3 trials are padded to 4 and split in two; the table is unchanged."""
+    path = _write(tmp_path, TOY)
+    out = tmp_path / "out"
+    run = subprocess.run(_cli_command(path, out, "--chunk-size", "3", "--cpu-devices", "2", "--no-progress"),
+                         cwd=tmp_path, env=_cli_env(), capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert (out / "results.csv").read_bytes() == _run(path, tmp_path / "one_device", chunk_size=3)
+    assert _metadata(out)["runs"][-1]["devices"] == 2
+
+
+def test_a_table_is_resumed_on_as_many_devices_as_it_was_started(tmp_path, capsys):
+    """A split program can differ in the last bits, so devices are not mixed within a table."""
+    path = _write(tmp_path, SLOW)
+    out = tmp_path / "out"
+    run_sweep(load_sweep(path, chunk_size=2), out, progress=False)
+    metadata = _metadata(out)
+    metadata["runs"][-1]["devices"] = 2
+    (out / "metadata.json").write_text(json.dumps(metadata))
+    next(iter((out / "parts").glob("rows-*.csv"))).unlink()
+    assert cli.main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
+    assert "computed on 2 device(s) and JAX presents 1: resume it with --cpu-devices 2" in capsys.readouterr().err
+
+
 def test_resume_fills_holes_with_another_chunk_size(tmp_path):
     path = _write(tmp_path, TOY)
     out = tmp_path / "out"
