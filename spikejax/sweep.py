@@ -79,7 +79,9 @@ Notes:
     Resuming. The same command, run again after a run stopped however it stopped
     (SIGKILL included), skips the trials in the parts and runs the others, with
     any chunk size; the final ``results.csv`` is byte for byte the one of an
-    uninterrupted run. The sweep's fingerprint, a hash of ``[sweep]``, ``[fixed]``
+    uninterrupted run. It must run on as many devices as the first run did
+    (each run's count is in ``metadata.json``): a chunk split over devices is
+    compiled apart and can differ in the last bits. The sweep's fingerprint, a hash of ``[sweep]``, ``[fixed]``
     and ``[grid]`` as parsed (seeds as overridden, chunk size left out), keeps the
     results of another sweep out of a directory. Resuming assumes that the trial's
     code is the same; ``metadata.json`` records each run's git commit.
@@ -1098,7 +1100,8 @@ def _check_same_devices(out: Path, metadata: Mapping[str, Any]) -> None:
     if used and used != {have}:
         raise UserError(
             f"{out} was computed on {', '.join(map(str, sorted(used)))} device(s) and JAX presents {have}: "
-            f"resume it with --cpu-devices {min(used)} (a split program can differ in the last bits)"
+            f"resume it where JAX presents {min(used)} (on a CPU: --cpu-devices {min(used)}), as a split program "
+            "can differ in the last bits"
         )
 
 

@@ -273,7 +273,8 @@ def test_a_table_is_resumed_on_as_many_devices_as_it_was_started(tmp_path, capsy
     (out / "metadata.json").write_text(json.dumps(metadata))
     next(iter((out / "parts").glob("rows-*.csv"))).unlink()
     assert cli.main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
-    assert "computed on 2 device(s) and JAX presents 1: resume it with --cpu-devices 2" in capsys.readouterr().err
+    assert "computed on 2 device(s) and JAX presents 1: resume it where JAX presents 2 (on a CPU: --cpu-devices 2)" in (
+        capsys.readouterr().err)
 
 
 def test_resume_fills_holes_with_another_chunk_size(tmp_path):

@@ -12,14 +12,16 @@ two waypoints.
 
 - `run_spikejax_flights`: ``jax.jit(jax.vmap(fly))`` over network seeds (and,
   optionally, robots drawn by `robots.robobee.params.randomize`): SNN,
-  plasticity, decoder, teacher and MJX physics in one compiled ``lax.scan``.
+  plasticity, decoder, teacher and MJX physics in one compiled ``lax.scan``,
+  on one device or split over several (`spikejax.devices.shard_batch`).
 - `run_brian2_closed_loop`: the paper's own setup. "At every time step, the
   simulator calls a function to update the RoboBee state and another function
   to compute the weight changes for each set of synapses following equation
   (10)": the same network (the same drawn weights, connectivity and thresholds
   as spikejax's flight 0) in Brian2's runtime mode, and a
   ``network_operation`` that runs at the end of every step (see
-  `Brian2Flight`).
+  `Brian2Flight`). `run_brian2_on_all_cores` runs one such flight per core
+  side by side, as a Brian2 user with several cores would.
 
 Each returns a row with compile or build time apart from run time, flights per
 second, simulated seconds per wall-clock second and aggregate neuron updates
