@@ -8,9 +8,11 @@ share of the batch with ``jax.shard_map``. On the 2-core CPU this made the
 synchronous Hough line detector about twice as fast at 64 streams
 (docs/BENCHMARKS.md). The same code spreads a batch over GPUs.
 
-Results do not depend on the number of devices: each batch member is computed
-alone, and a batch that does not divide evenly is padded with copies of its
-last member, which are dropped from the result.
+Each batch member is computed alone, and a batch that does not divide evenly
+is padded with copies of its last member, which are dropped from the result.
+The split program is compiled apart, though, so a chaotic computation can come
+out a rounding different from one device (the Hough spikes and the RoboBee
+flights did not; some RoboBee sweep trials did, see `spikejax.sweep`).
 """
 
 from __future__ import annotations
