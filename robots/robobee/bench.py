@@ -527,14 +527,16 @@ class Brian2Flight:
 
 def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
                            flight_s: float = FLIGHT_S, scale_plan: bool = True, learn: bool = True,
-                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY, barrier=None) -> dict:
+                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY, barrier=None,
+                           repeats: int = 1) -> dict:
     """One closed-loop flight in Brian2's runtime mode (`Brian2Flight`), timed on ``duration`` simulated seconds.
 
     The network is spikejax's flight 0 of the same ``seed``. A first run of
     ``warmup_steps`` steps generates (and for Cython compiles, or loads from
     Cython's cache) the code: ``build_or_compile_s`` is the network's
     construction plus that run. Then the flight restarts (`Brian2Flight.reset`)
-    and ``duration`` seconds are timed (``run_s``, one ``Network.run``, its
+    and ``duration`` seconds are timed ``repeats`` times, the flight restarted
+    before each (``run_s``: the fastest ``Network.run``, its
     preparation included: ``prepare_s``, the time of a further run of
     ``warmup_steps``, measures that); flights/s is extrapolated to a
     ``flight_s`` flight if ``duration`` is shorter (Brian2's time per step is
@@ -552,8 +554,9 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
         learn: apply Eq. (10).
         use_snn: the SNN steers (else the teacher).
         warmup_steps: steps of the code-generating first run.
-        barrier: if given (a ``multiprocessing`` barrier), waited on just before the
+        barrier: if given (a ``multiprocessing`` barrier), waited on just before each
             timed run, so that flights in several processes are timed together.
+        repeats: timed runs (the recording and weights are those of the first).
 
     Returns:
         A row (`ROW_FIELDS`) with ``recording`` (`Brian2Flight.recording`),
@@ -582,14 +585,17 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
             flight = Brian2Flight(key, hold_steps, segment_steps, learn=learn, use_snn=use_snn)
             flight.run(warmup_steps)
         build_s = time.perf_counter() - t0
-        flight.reset()
-        if barrier is not None:
-            barrier.wait()
-        t0 = time.perf_counter()
-        flight.run(n_steps)
-        run_s = time.perf_counter() - t0
-        weights = [np.asarray(syn.w[:]) for syn in flight.synapses]
-        result = flight.recording(), flight.counts.copy(), flight.op_s, weights
+        run_s, result = math.inf, None
+        for _ in range(repeats):
+            flight.reset()
+            if barrier is not None:
+                barrier.wait()
+            t0 = time.perf_counter()
+            flight.run(n_steps)
+            run_s = min(run_s, time.perf_counter() - t0)
+            if result is None:
+                weights = [np.asarray(syn.w[:]) for syn in flight.synapses]
+                result = flight.recording(), flight.counts.copy(), flight.op_s, weights
         flight.reset()
         t0 = time.perf_counter()
         flight.run(warmup_steps)
@@ -616,14 +622,14 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
 
 
 def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
-                            flight_s: float = FLIGHT_S) -> dict:
+                            flight_s: float = FLIGHT_S, repeats: int = 1) -> dict:
     """``processes`` Brian2 flights at once, one process each: what a Brian2 user gets from that many cores.
 
     Brian2's runtime mode runs one flight on one core; a user with several
     cores runs several flights side by side. Each process builds its flight
     (`run_brian2_closed_loop`) and then all start their timed run together
-    (a barrier); the row's ``run_s`` is the slowest one's, so its flights/s is
-    the aggregate of all of them.
+    (a barrier), ``repeats`` times; the row's ``run_s`` is the slowest
+    process's fastest run, so its flights/s is the aggregate of all of them.
 
     Returns:
         A row (`ROW_FIELDS`) with ``batch = processes``; ``build_or_compile_s`` is the slowest build.
@@ -632,8 +638,8 @@ def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: in
     with context.Manager() as manager:
         barrier = manager.Barrier(processes)
         with ProcessPoolExecutor(processes, mp_context=context) as pool:
-            futures = [pool.submit(run_brian2_closed_loop, duration, seed, target, flight_s=flight_s, barrier=barrier)
-                       for _ in range(processes)]
+            futures = [pool.submit(run_brian2_closed_loop, duration, seed, target, flight_s=flight_s, barrier=barrier,
+                                   repeats=repeats) for _ in range(processes)]
             rows = [f.result() for f in futures]
     impl = f"{rows[0]['impl']}, {processes} processes at once"
     return _row(impl, processes, flight_s, rows[0]["timed_s"], max(r["build_or_compile_s"] for r in rows),
@@ -657,8 +663,8 @@ def main(args: argparse.Namespace) -> int:
     flights; default: every batch of `BATCHES`), ``out`` (a directory for
     ``bench_robobee.csv``, and ``bench_robobee_network.csv`` from the network
     table), ``duration`` (simulated seconds of a spikejax flight, default 2.5),
-    ``seed`` (default 0), ``repeats`` (timed spikejax runs per row, the fastest
-    kept; default 1), ``randomize`` (also fly randomized robots at the largest
+    ``seed`` (default 0), ``repeats`` (timed runs per row, Brian2's and
+    spikejax's, the fastest kept; default 3), ``randomize`` (also fly randomized robots at the largest
     batch), ``brian2_target`` (``"cython"``, the default, or ``"numpy"``),
     ``network`` (False skips the network-alone table) and ``cpu_devices`` (the
     CPU devices JAX presents, default one per core; set before JAX starts).
@@ -672,7 +678,7 @@ def main(args: argparse.Namespace) -> int:
     n_dev = cpu_devices_for_run(getattr(args, "cpu_devices", None))
     duration = float(getattr(args, "duration", None) or FLIGHT_S)
     seed = int(getattr(args, "seed", None) or 0)
-    repeats = int(getattr(args, "repeats", None) or 1)
+    repeats = int(getattr(args, "repeats", None) or 3)
     batches = _batches(getattr(args, "trials", None))
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"{n_dev} x {jax.devices()[0].platform}, jax {jax.__version__}")
@@ -681,9 +687,11 @@ def main(args: argparse.Namespace) -> int:
           f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
           f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
     brian2_target = getattr(args, "brian2_target", None) or "cython"
-    runs = [lambda: run_isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration)]
+    runs = [lambda: run_isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration,
+                                 repeats=repeats)]
     if n_dev > 1:
-        runs.append(lambda: run_brian2_on_all_cores(n_dev, duration, seed, brian2_target, flight_s=duration))
+        runs.append(lambda: run_brian2_on_all_cores(n_dev, duration, seed, brian2_target, flight_s=duration,
+                                                    repeats=repeats))
     for b in batches:
         for d in [1] + ([n_dev] if n_dev > 1 and b >= n_dev else []):
             runs.append(lambda b=b, d=d: run_spikejax_flights(b, duration, seed, repeats=repeats, devices=d))
