@@ -75,8 +75,9 @@ TORQUE_UNIT = 1e-6
 _RULE = reward_modulated_hebbian()
 # Rows gathered per pass by `spikejax.synapses.propagate` (input->hidden, hidden->output).
 # Flight 1 has 5.0 and 2.8 spikes a step on average, up to 67 and 62 in bursts; under
-# vmap the busiest flight sets the passes. Measured at 256 flights (us per flight-step):
-# (8, 4) 6.4, (12, 8) 5.7, (16, 8) 5.8, (24, 16) 6.1, (48, 32) 8.3: small passes win.
+# vmap the busiest flight sets the passes. Measured at 256 flights over two CPU devices
+# (us of wall time per flight-step): (8, 6) 1.79, (12, 8) 1.66, (16, 8) 1.80, (16, 12) 1.71,
+# (24, 12) 1.88: small passes win.
 MAX_ROWS = (12, 8)
 
 

@@ -67,8 +67,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax.devices import shard_batch
 from spikejax.devices import cpu_devices_for_run
+from spikejax.devices import shard_batch
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
 
