@@ -1,124 +1,85 @@
-"""The ``spikejax`` command: ``reproduce``, ``sweep``, ``bench``, ``detect`` and ``info``.
+"""The ``spikejax`` command: finds the commands registered as entry points and runs one.
 
-The CLI sits on top of the library and the robots: reproductions, benchmarks
-and detectors are named here by import path and imported only when asked for, so that
-``spikejax`` itself never imports ``robots``.
+Commands register under the entry-point group ``spikejax.commands`` (see
+``spikejax.commands``): ``reproduce.gaits`` is ``spikejax reproduce gaits``,
+``sweep`` is ``spikejax sweep``. ``spikejax`` names no command itself, so the
+library imports no robot: the robots (or any installed package) register theirs.
+Only the commands of the group asked for are imported.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
+from importlib.metadata import EntryPoint, entry_points
 
+from spikejax.commands import Command
 from spikejax.errors import UserError
 
-# name -> "module:function"; each function takes the parsed argparse.Namespace.
-REPRODUCTIONS = {
-    "gaits": "robots.hexapod.reproduce:main",
-    "gait-choices": "robots.hexapod.reproduce:main_choices",
-    "robobee": "robots.robobee.reproduce:main",
-    "robobee-learning": "robots.robobee.reproduce:main_learning",
-    "snake-gait": "robots.snake.reproduce:main",
-    "robobee-populations": "robots.robobee.reproduce:main_populations",
-}
-# ``spikejax detect TARGET FILE``: "module:function".
-DETECTORS = {
-    "pipe": "spikejax.vision.detect:main",
-}
-BENCHMARKS = {
-    "gaits": "robots.hexapod.bench:main",
-    "robobee-network": "robots.robobee.bench_network:main_network",
-    "robobee": "robots.robobee.bench:main",
-    "hough": "spikejax.vision.bench_hough:main",
-    "snake": "robots.snake.bench:main",
-}
+GROUP = "spikejax.commands"
 
 
-def _load(path: str):
-    module_name, _, attr = path.partition(":")
-    return getattr(importlib.import_module(module_name), attr)
+def registered() -> dict[str, dict[str, EntryPoint]]:
+    """The registered commands, ``{group: {name: entry point}}``; a single command is ``{name: {"": ...}}``."""
+    found: dict[str, dict[str, EntryPoint]] = {}
+    for point in entry_points(group=GROUP):
+        group, _, name = point.name.partition(".")
+        found.setdefault(group, {})[name] = point
+    return dict(sorted(found.items()))
 
 
-def _build_parser() -> argparse.ArgumentParser:
+def load(point: EntryPoint) -> Command:
+    """The :class:`Command` an entry point names; a UserError if it names something else."""
+    command = point.load()
+    if not isinstance(command, Command):
+        raise UserError(f"entry point {point.name} = {point.value} is not a spikejax.commands.Command")
+    return command
+
+
+def _top_parser(commands: dict[str, dict[str, EntryPoint]]) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="spikejax", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    rep = sub.add_parser("reproduce", help="reproduce a paper's result (table + figure)")
-    rep.add_argument("target", choices=sorted(REPRODUCTIONS))
-    rep.add_argument("--out", required=True, help="output directory")
-    rep.add_argument("--trials", type=int, default=None, help="seeds per condition (default: the sweep file's)")
-    rep.add_argument("--chunk-size", type=int, default=None, help="trials per compiled batch")
-    rep.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-
-    sw = sub.add_parser("sweep", help="run a sweep file (TOML); resumes where it stopped")
-    sw.add_argument("file", help="sweep file (TOML)")
-    sw.add_argument("--out", required=True, help="output directory (results table + metadata)")
-    sw.add_argument("--chunk-size", type=int, default=None, help="trials per compiled batch")
-    sw.add_argument("--seeds", type=int, default=None, help="override the number of seeds")
-    sw.add_argument("--cpu-devices", type=int, default=None,
-                    help="present the CPU as N devices and split each chunk over them (default: JAX's devices as they are)")
-    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-
-    be = sub.add_parser("bench", help="measure speed against the peers (compile time apart)")
-    be.add_argument("target", choices=sorted(BENCHMARKS))
-    be.add_argument("--trials", type=int, default=None, help="trials to time")
-    be.add_argument("--out", default=None, help="write the figures as CSV here")
-    be.add_argument("--quick", action="store_true", help="a short run at small sizes (snake)")
-    be.add_argument("--cpu-devices", type=int, default=None,
-                    help="CPU devices JAX presents (hough, robobee; default: one per core, the batch split over them)")
-    be.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-
-    det = sub.add_parser("detect", help="detect shapes in an event recording")
-    det_sub = det.add_subparsers(dest="target", required=True)
-    pipe = det_sub.add_parser("pipe", help="pipe bodies and entries (spiking Hough, Alg. 2-3 of the pipe paper)")
-    pipe.add_argument("file", help="event recording: .npz, .npy (structured array x, y, t, p) or .aedat4")
-    pipe.add_argument("--mode", choices=("sync", "async"), default="sync", help="slots at once (default) or event by event")
-    pipe.add_argument("--out", default=None, help="write detections.csv and overlay.png here")
-    pipe.add_argument("--slot", type=float, default=0.02, help="time slot, s (default 0.02)")
-    pipe.add_argument("--sub-slots", type=int, default=5, help="updates per slot; a neuron fires at most once per update")
-    pipe.add_argument("--capacity", type=int, default=4096, help="events per update (the rest are counted)")
-    pipe.add_argument("--sensor-size", type=int, nargs=2, metavar=("W", "H"), default=None, help="default: the file's, else 128 128")
-    pipe.add_argument("--shapes", choices=("both", "lines", "circles"), default="both", help="bodies (lines), entries (circles)")
-    pipe.add_argument("--v-th", type=float, default=None, help="Hough neuron threshold, votes (default: half the sensor height)")
-    pipe.add_argument("--decay", type=float, default=50.0, help="decay rate lambda of Alg. 1, votes/s")
-    pipe.add_argument("--fov", type=float, default=60.0, help="horizontal field of view, degrees")
-    pipe.add_argument("--pipe-size", type=float, default=0.0, help="pipe diameter, m, if known (distance by Eq. 8)")
-    pipe.add_argument("--speed", type=float, default=0.0, help="forward speed, m/s (distance by Eq. 9 otherwise)")
-    pipe.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-
-    sub.add_parser("info", help="versions and devices")
+    parser.add_argument("command", choices=list(commands), metavar="COMMAND", help=", ".join(commands))
+    parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     return parser
 
 
-def _info(_: argparse.Namespace) -> int:
-    import jax
-
-    import spikejax
-
-    print(f"spikejax {spikejax.__version__}")
-    print(f"jax {jax.__version__}, devices: {', '.join(str(d) for d in jax.devices())}")
-    return 0
+def _command_parser(group: str, points: dict[str, EntryPoint]) -> argparse.ArgumentParser:
+    """The parser of ``spikejax GROUP``: the command itself, or a sub-parser per command of the group."""
+    if list(points) == [""]:
+        command = load(points[""])
+        parser = command.parser(f"spikejax {group}")
+        parser.set_defaults(_command=command)
+        return parser
+    parser = argparse.ArgumentParser(prog=f"spikejax {group}")
+    sub = parser.add_subparsers(dest="_name", required=True, metavar="TARGET")
+    for name, point in sorted(points.items()):
+        command = load(point)
+        one = sub.add_parser(name, help=command.help, description=command.description or command.help)
+        command.add_arguments(one)
+        one.set_defaults(_command=command)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _build_parser().parse_args(argv)
+    """Run ``spikejax ARGS``; returns the exit status (2 with one line on stderr for a bad input)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    commands = registered()
+    top = _top_parser(commands)
+    if not argv or argv[0] in ("-h", "--help"):
+        top.print_help()
+        return 0 if argv else 2
+    head = top.parse_args(argv[:1])
+    name = head.command
     try:
-        if args.command == "info":
-            return _info(args)
-        if args.command == "sweep":
-            from spikejax import sweep
-
-            return sweep.main(args)
-        if args.command == "detect":
-            return int(_load(DETECTORS[args.target])(args) or 0)
-        registry = REPRODUCTIONS if args.command == "reproduce" else BENCHMARKS
-        return int(_load(registry[args.target])(args) or 0)
+        args = vars(_command_parser(name, commands[name]).parse_args(argv[1:]))
+        command: Command = args.pop("_command")
+        name = " ".join([name, args.pop("_name", "")]).strip()
+        return int(command.run(**args) or 0)
     except UserError as err:
-        print(f"spikejax {args.command}: error: {err}", file=sys.stderr)
+        print(f"spikejax {name}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"spikejax {args.command}: interrupted", file=sys.stderr)
+        print(f"spikejax {name}: interrupted", file=sys.stderr)
         return 130
 
 
