@@ -18,6 +18,8 @@ demo: $(STAMP)
 	$(VENV)/bin/spikejax reproduce gait-choices --out $(OUT)
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP)
