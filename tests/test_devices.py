@@ -1,4 +1,4 @@
-"""A batch split over two CPU devices gives the one-device results, padding included."""
+"""A batch split over two CPU devices gives the one-device results, padding and replicated arguments included."""
 
 import subprocess
 import sys
@@ -41,6 +41,35 @@ _TWO_DEVICES = textwrap.dedent(
 )
 
 
+_REPLICATED = textwrap.dedent(
+    """
+    from typing import NamedTuple
+    import jax, jax.numpy as jnp, numpy as np
+    from spikejax import devices
+    devices.use_cpu_devices(2)
+    assert len(jax.devices()) == 2
+
+    class Params(NamedTuple):
+        a: object
+        b: object
+
+    axes = (Params(a=0, b=None), 0)
+    run = jax.vmap(lambda p, s: jnp.sin(p.a * p.b) + s * p.b, in_axes=axes)
+    params = Params(a=np.linspace(0.0, 1.0, 5, dtype=np.float32), b=np.float32(3.0))
+    seeds = np.arange(5, dtype=np.int32)
+    one = np.asarray(jax.jit(run)(params, seeds))
+    split = devices.shard_batch(run, in_axes=axes)  # 5 members over 2 devices: padded to 6, b whole on both
+    assert split.padded_size(5) == 6
+    assert np.array_equal(np.asarray(split(params, seeds)), one)
+    compiled = split.compile(params, seeds)
+    assert np.array_equal(np.asarray(compiled(params, seeds)), one)
+    assert np.array_equal(np.asarray(compiled(params._replace(b=np.float32(2.0)), seeds)),
+                          np.asarray(jax.jit(run)(params._replace(b=np.float32(2.0)), seeds)))
+    print("ok")
+    """
+)
+
+
 def test_two_cpu_devices_give_the_one_device_spikes():
     run = subprocess.run([sys.executable, "-c", _TWO_DEVICES], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
@@ -61,3 +90,20 @@ def test_mismatched_batch_axes_are_rejected():
 def test_a_device_count_below_one_is_rejected():
     with pytest.raises(UserError, match=">= 1"):
         devices.use_cpu_devices(0)
+
+
+def test_unbatched_arguments_go_whole_to_every_device():
+    run = subprocess.run([sys.executable, "-c", _REPLICATED], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.strip().endswith("ok")
+
+
+def test_compiled_ahead_on_one_device_is_the_jitted_function():
+    f = devices.shard_batch(lambda a, b: a * b, devices=jax.devices()[:1], in_axes=(0, None))
+    compiled = f.compile(jnp.arange(3.0), jnp.float32(2.0))
+    np.testing.assert_array_equal(compiled(jnp.arange(3.0), jnp.float32(3.0)), [0.0, 3.0, 6.0])
+
+
+def test_only_the_leading_axis_is_split():
+    with pytest.raises(UserError, match="leading axis"):
+        devices.shard_batch(lambda a: a, in_axes=(1,))

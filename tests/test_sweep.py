@@ -383,18 +383,40 @@ def test_bad_file_is_one_line_error_before_anything_runs(tmp_path, capsys, case)
 
 
 @pytest.mark.parametrize(
-    ("flags", "expected"),
+    ("overrides", "expected"),
     [
-        (["--seeds", "0"], "--seeds must be an integer >= 1, got 0"),
-        (["--chunk-size", "-3"], "--chunk-size must be an integer >= 1, got -3"),
+        ({"seeds": 0}, "--seeds must be an integer >= 1, got 0"),
+        ({"chunk_size": -3}, "--chunk-size must be an integer >= 1, got -3"),
     ],
 )
-def test_bad_flags_are_one_line_errors(tmp_path, capsys, flags, expected):
+def test_bad_overrides_are_one_line_errors(tmp_path, overrides, expected):
     path = _write(tmp_path, TOY)
 
-    rc = cli.main(["sweep", str(path), "--out", str(tmp_path / "out"), *flags])
+    with pytest.raises(UserError) as err:
+        load_sweep(path, **overrides)
 
-    _assert_one_line_error(rc, capsys.readouterr().err, expected)
+    assert str(err.value) == expected
+
+
+@pytest.mark.parametrize(
+    ("flags", "expected"),
+    [
+        (["--seeds", "0"], "argument --seeds: must be at least 1, got 0"),
+        (["--chunk-size", "-3"], "argument --chunk-size: must be at least 1, got -3"),
+        (["--cpu-devices", "0"], "argument --cpu-devices: must be at least 1, got 0"),
+    ],
+)
+def test_bad_flags_are_usage_errors_before_anything_runs(tmp_path, capsys, flags, expected):
+    path = _write(tmp_path, TOY)
+
+    with pytest.raises(SystemExit) as done:
+        cli.main(["sweep", str(path), "--out", str(tmp_path / "out"), *flags])
+
+    err = capsys.readouterr().err
+    assert done.value.code == 2
+    assert "Traceback" not in err
+    assert err.splitlines()[-1] == f"spikejax sweep: error: {expected}"
+    assert not (tmp_path / "out").exists()
 
 
 def test_missing_file_is_one_line_error(tmp_path, capsys):

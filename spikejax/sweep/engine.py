@@ -1,0 +1,295 @@
+"""Running a sweep: the trials in chunks, each chunk one compiled batch split over the devices.
+
+`run_sweep` runs the trials of a `spikejax.sweep.SweepSpec` that its output
+directory does not hold yet. The missing trials are cut into chunks of at most
+``chunk_size`` consecutive rows, none crossing a change of the static axes'
+values. Every chunk is padded with its last trial to one length, so that one
+program, ``jax.vmap`` of the trial compiled ahead of time, serves every chunk
+of the same static values (and no result depends on the chunk size). The
+program splits each chunk evenly over ``jax.devices()`` with
+`spikejax.devices.shard_batch`: the grid's traced fields and the seeds are
+split, the fields off the grid go whole to every device. One chunk is in flight
+while the one before is written (`spikejax.sweep.store`): dispatch is
+asynchronous.
+
+A trial's key is `trial_key` of its seed alone (see `spikejax.sweep`), so no
+trial depends on the chunk size or on the other trials of its batch.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm import tqdm
+
+from spikejax.devices import BatchSplit, shard_batch
+from spikejax.errors import UserError
+from spikejax.sweep import store as sweep_store
+from spikejax.sweep.spec import SweepSpec
+from spikejax.sweep.table import Column, cells, key_columns, result_dtype
+
+__all__ = ["run_sweep", "trial_key"]
+
+_NAN_TRIALS_LISTED = 20
+
+
+def trial_key(base_seed: int, seed: int | jax.Array) -> jax.Array:
+    """The key of the trials of seed ``seed``, at every grid point.
+
+    Args:
+        base_seed: the sweep's ``base_seed``, ``0 <= base_seed < 2**32``.
+        seed: the seed number, ``0 .. seeds-1`` (an int or an int32 array).
+
+    Returns:
+        ``jax.random.fold_in(jax.random.key(base_seed), seed)``, a typed key.
+
+    Example:
+        >>> u = jax.random.uniform(trial_key(0, 3))  # the draw of seed 3, anywhere
+    """
+    return jax.random.fold_in(jax.random.key(base_seed), seed)
+
+
+def _as_result_dict(result: Any, trial_path: str) -> dict[str, Any]:
+    if isinstance(result, tuple) and hasattr(result, "_asdict"):
+        return dict(result._asdict())
+    if isinstance(result, Mapping):
+        return dict(result)
+    raise UserError(
+        f"the trial {trial_path} must return a NamedTuple or a dict of scalars, got {type(result).__name__}"
+    )
+
+
+def _bound_trial(spec: SweepSpec, static_values: Mapping[str, Any]) -> Callable[[Any, jax.Array], Any]:
+    static = {**spec.static, **static_values}
+    return functools.partial(spec.trial, **static) if static else spec.trial
+
+
+def _static_values(spec: SweepSpec, trial: int) -> dict[str, Any]:
+    """The static axes' values of trial ``trial`` (empty without static axes)."""
+    coords = np.unravel_index(trial // spec.seeds, spec.grid_shape)
+    return {axis.name: axis.values[int(c)] for axis, c in zip(spec.axes, coords) if axis.static}
+
+
+def _example_params(spec: SweepSpec) -> Any:
+    values = dict(spec.traced)
+    for axis in spec.axes:
+        if not axis.static:
+            values[axis.name] = axis.array()[0]
+    return spec.params_type(**values)
+
+
+def _result_columns(spec: SweepSpec) -> list[Column]:
+    """The result columns, found by tracing one trial (nothing is compiled)."""
+    trial = _bound_trial(spec, _static_values(spec, 0))
+    names: list[Any] = []
+
+    def probe(params: Any, key: jax.Array) -> dict[str, Any]:
+        result = _as_result_dict(trial(params, key), spec.trial_path)
+        names.extend(result)  # dicts come back with sorted keys; keep the trial's order
+        return result
+
+    try:
+        shapes = jax.eval_shape(probe, _example_params(spec), jax.random.key(0))
+    except (ValueError, TypeError) as err:
+        # A trial that validates its own arguments (a bad [fixed] choice, say) says why here.
+        message = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise UserError(f"the trial {spec.trial_path} rejects the sweep's values: {message}") from None
+    taken = {column.name for column in key_columns(spec)}
+    columns = []
+    for name in names:
+        if not isinstance(name, str) or name in taken:
+            raise UserError(
+                f"the trial {spec.trial_path} returns a result named {name!r}, which is not a free column name"
+            )
+        shape = shapes[name]
+        if not isinstance(shape, jax.ShapeDtypeStruct) or shape.shape != ():
+            raise UserError(
+                f"result '{name}' of the trial {spec.trial_path} must be a scalar, got "
+                f"{getattr(shape, 'shape', type(shape).__name__)}"
+            )
+        columns.append(Column(name, result_dtype(shape.dtype, name, spec.trial_path)))
+        taken.add(name)
+    if not columns:
+        raise UserError(f"the trial {spec.trial_path} returns no results")
+    return columns
+
+
+def _batched_trial(
+    spec: SweepSpec, results: list[Column], static_values: Mapping[str, Any], devices: list[Any]
+) -> BatchSplit:
+    """The trial for these static values, vmapped over a chunk and split over ``devices``.
+
+    Each trial is computed alone either way, but XLA compiles the split program
+    apart, and a chaotic trial can come out a rounding different on another
+    number of devices (the toy trials of the tests do not), so a table is only
+    resumed on as many devices as it was started on (`spikejax.sweep.store`).
+    """
+    trial = _bound_trial(spec, static_values)
+    on_grid = {axis.name for axis in spec.axes if not axis.static}
+    params_axes = spec.params_type(**{field: 0 if field in on_grid else None for field in spec.params_type._fields})
+
+    def one(params: Any, seed: jax.Array) -> tuple[jax.Array, ...]:
+        result = _as_result_dict(trial(params, trial_key(spec.base_seed, seed)), spec.trial_path)
+        return tuple(jnp.asarray(result[column.name]).astype(column.dtype) for column in results)
+
+    return shard_batch(jax.vmap(one, in_axes=(params_axes, 0)), devices, in_axes=(params_axes, 0))
+
+
+def _chunk_inputs(spec: SweepSpec, start: int, end: int, size: int) -> tuple[Any, np.ndarray]:
+    """Params and seeds of the trials ``start .. end-1``, padded to ``size`` with the last."""
+    index = np.minimum(np.arange(start, start + size), end - 1)
+    point, seed = np.divmod(index, spec.seeds)
+    coords = np.unravel_index(point, spec.grid_shape)
+    values = dict(spec.traced)
+    for axis, coord in zip(spec.axes, coords):
+        if not axis.static:
+            values[axis.name] = axis.array()[coord]
+    return spec.params_type(**values), seed.astype(np.int32)
+
+
+def _chunks(missing: list[tuple[int, int]], size: int, block: int | None = None) -> Iterator[tuple[int, int]]:
+    """Chunks of at most ``size`` trials covering ``missing``, none crossing a multiple of ``block``."""
+    for start, end in missing:
+        chunk_start = start
+        while chunk_start < end:
+            chunk_end = min(chunk_start + size, end)
+            if block is not None:
+                chunk_end = min(chunk_end, (chunk_start // block + 1) * block)
+            yield chunk_start, chunk_end
+            chunk_start = chunk_end
+
+
+def _static_block(spec: SweepSpec) -> int | None:
+    """Trials that share the static axes' values come in runs of this length (None: no static axis)."""
+    static = [i for i, axis in enumerate(spec.axes) if axis.static]
+    if not static:
+        return None
+    return spec.seeds * math.prod(spec.grid_shape[static[-1] + 1 :])
+
+
+def _progress_bar(spec: SweepSpec, done: int, enabled: bool) -> tqdm:
+    interactive = sys.stderr.isatty() and os.environ.get("CI", "").lower() not in ("1", "true")
+    return tqdm(
+        total=spec.n_trials,
+        initial=done,
+        desc=spec.name,
+        unit=" trials",
+        file=sys.stderr,
+        disable=not enabled,
+        dynamic_ncols=interactive,
+        mininterval=0.5 if interactive else 30.0,
+        smoothing=0.05,
+    )
+
+
+def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool = True) -> Path:
+    """Run the trials of ``spec`` that ``out_dir`` does not hold yet.
+
+    The trials run in chunks of ``spec.chunk_size`` consecutive rows through one
+    compiled ``jax.jit(jax.vmap(trial))``, split evenly over ``jax.devices()``
+    (the accelerators, or the CPU's cores when ``--cpu-devices`` presents them
+    as devices); each chunk is written to disk as soon as it is done. Run it
+    again after an interruption and it goes on where it stopped; on a finished
+    sweep it computes nothing. See `spikejax.sweep.store` for the files in
+    ``out_dir``, how they are kept whole, and the rules of resuming.
+
+    Args:
+        spec: the sweep, from `spikejax.sweep.load_sweep`.
+        out_dir: the output directory; created if missing.
+        progress: show a progress bar (trials/s, ETA) on stderr.
+
+    Returns:
+        The path of ``results.csv``.
+
+    Raises:
+        UserError: ``out_dir`` holds another sweep or other files, another run is
+            going on in it, or the trial does not return a NamedTuple or dict of
+            scalars. All are found before anything is compiled.
+    """
+    out = Path(out_dir)
+    metadata, missing = sweep_store.existing(out, spec)
+    if metadata is not None and not missing:
+        columns = sweep_store.recorded_columns(metadata)
+    else:
+        columns = key_columns(spec) + _result_columns(spec)
+        sweep_store.check_columns(out, metadata, columns)
+    first_result = len(key_columns(spec))
+    with sweep_store.opened(out, spec, metadata, columns, spec.chunk_size) as store:
+        try:
+            _run_missing(spec, store, columns[first_result:], progress)
+        finally:
+            store.publish()
+        if store.done == spec.n_trials:
+            _finish(spec, store, first_result)
+    return sweep_store.results_path(out)
+
+
+def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column], progress: bool) -> None:
+    missing = store.missing()
+    if not missing:
+        return
+    block = _static_block(spec)
+    chunks = list(_chunks(missing, spec.chunk_size, block))
+    devices = jax.devices()
+    # Every chunk is padded with its last trial to the longest: one program serves them all.
+    length = max(end - start for start, end in chunks)
+    store.begin_compute(len(devices))
+    programs: dict[tuple[Any, ...], Callable[..., tuple[jax.Array, ...]]] = {}
+
+    def program(start: int) -> Callable[..., tuple[jax.Array, ...]]:
+        static_values = _static_values(spec, start)
+        signature = tuple(static_values.items())
+        if signature not in programs:
+            batched = _batched_trial(spec, results, static_values, devices)
+            if progress:
+                shown = "".join(f", {name} = {value}" for name, value in signature)
+                print(
+                    f"{spec.name}: compiling for chunks of {batched.padded_size(length)} trials{shown}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            began = time.perf_counter()
+            programs[signature] = batched.compile(*_chunk_inputs(spec, 0, 1, length))
+            store.add_compile_seconds(time.perf_counter() - began)
+        return programs[signature]
+
+    with _progress_bar(spec, store.done, progress) as bar:
+        # One chunk in flight while the previous one is written: dispatch is asynchronous.
+        pending = None
+        for start, end in chunks:
+            outputs = program(start)(*_chunk_inputs(spec, start, end, length))
+            if pending is not None:
+                _write_chunk(spec, store, bar, *pending)
+            pending = (start, end, outputs)
+        if pending is not None:
+            _write_chunk(spec, store, bar, *pending)
+
+
+def _write_chunk(
+    spec: SweepSpec, store: sweep_store.Store, bar: tqdm, start: int, end: int, outputs: tuple[jax.Array, ...]
+) -> None:
+    results = [np.asarray(values)[: end - start] for values in outputs]
+    store.add(start, end, cells(spec, start, end, results))
+    bar.update(end - start)
+
+
+def _finish(spec: SweepSpec, store: sweep_store.Store, first_result: int) -> None:
+    nan_trials = store.finish(first_result)
+    if nan_trials:
+        listed = ", ".join(str(trial) for trial in nan_trials[:_NAN_TRIALS_LISTED])
+        more = f", ... ({len(nan_trials) - _NAN_TRIALS_LISTED} more)" if len(nan_trials) > _NAN_TRIALS_LISTED else ""
+        print(
+            f"warning: sweep '{spec.name}': NaN results in {len(nan_trials)} of {spec.n_trials} trials: "
+            f"{listed}{more} (all in {store.metadata_path}, nan_trials)",
+            file=sys.stderr,
+        )
