@@ -13,7 +13,7 @@ import argparse
 import sys
 from importlib.metadata import EntryPoint, entry_points
 
-from spikejax.commands import Command
+from spikejax.commands import Command, OneLineParser
 from spikejax.errors import UserError
 
 GROUP = "spikejax.commands"
@@ -37,7 +37,7 @@ def load(point: EntryPoint) -> Command:
 
 
 def _top_parser(commands: dict[str, dict[str, EntryPoint]]) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="spikejax", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="spikejax", description=__doc__.splitlines()[0])
     parser.add_argument("command", choices=list(commands), metavar="COMMAND", help=", ".join(commands))
     parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     return parser
@@ -50,7 +50,7 @@ def _command_parser(group: str, points: dict[str, EntryPoint]) -> argparse.Argum
         parser = command.parser(f"spikejax {group}")
         parser.set_defaults(_command=command)
         return parser
-    parser = argparse.ArgumentParser(prog=f"spikejax {group}")
+    parser = OneLineParser(prog=f"spikejax {group}")
     sub = parser.add_subparsers(dest="_name", required=True, metavar="TARGET")
     for name, point in sorted(points.items()):
         command = load(point)

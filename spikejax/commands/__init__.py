@@ -21,7 +21,14 @@ import dataclasses
 import inspect
 from collections.abc import Callable
 
-__all__ = ["Command", "add_common", "count", "positive_float", "run_parameters"]
+__all__ = ["Command", "OneLineParser", "add_common", "count", "positive_float", "run_parameters"]
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line (``PROG: error: ...``, exit status 2), without the usage."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,7 +54,7 @@ class Command:
 
     def parser(self, prog: str) -> argparse.ArgumentParser:
         """A parser for this command alone (what ``--help`` shows)."""
-        parser = argparse.ArgumentParser(prog=prog, description=self.description or self.help)
+        parser = OneLineParser(prog=prog, description=self.description or self.help)
         self.add_arguments(parser)
         return parser
 
