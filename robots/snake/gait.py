@@ -26,7 +26,7 @@ kinematics rather than a fitted curve: the first joint is set so that the head
 points along the mean heading of the 17 modules (`head_compensation`), which is
 the body's direction of motion averaged over the wave. Eq. (4)-(6) of the
 pipe-tracking paper (the camera's sideways offset estimated from the head
-joint) are in `camera_offset`.
+joint) are in `spikejax.vision.pipe.camera_offset`.
 
 Sign conventions (those of ``snake.xml``): ``alpha_i > 0`` turns module ``i``
 to the left (odd ``i``, about ``+z``) or about ``+y`` (even ``i``) relative to
@@ -48,7 +48,6 @@ __all__ = [
     "JOINT_LIMIT",
     "N_JOINTS",
     "GaitParams",
-    "camera_offset",
     "default_gait",
     "gait_period",
     "head_compensation",
@@ -188,30 +187,3 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
     alpha = alpha.at[0].set(head + head_offset)
     return jnp.clip(alpha, -JOINT_LIMIT, JOINT_LIMIT)
 
-
-def camera_offset(theta, theta_dot, omega, A, alpha, phi_pos) -> jax.Array:
-    """The camera's sideways offset from the head joint, Eq. (4)-(6) of the pipe-tracking paper.
-
-    The head joint follows ``theta = a sin(omega t + phi)`` (Eq. (4)); shifting
-    its phase by ``phi_pos`` and scaling by ``alpha`` (Eq. (5)),
-
-    .. math:: \\theta_{tuned} = \\alpha (\\theta \\cos\\phi_{pos} + (\\theta'/\\omega) \\sin\\phi_{pos}),
-
-    and the offset perpendicular to the direction of motion is
-    ``A sin(theta_tuned)`` (Eq. (6)). Eq. (5) of the paper writes ``theta'``
-    for the phase-quadrature term; the exact identity needs ``theta' / omega``,
-    which is what is used here.
-
-    Args:
-        theta: head joint angle, rad.
-        theta_dot: its rate, rad/s.
-        omega: the gait's temporal frequency, rad/s.
-        A: amplitude of the sideways swing, m (the paper: -0.124 for V-REP, 1.400 for NRP).
-        alpha: ratio of 90 deg to the joint amplitude ``a`` (1.000 and 2.571).
-        phi_pos: phase difference, rad (0.000 and 0.908).
-
-    Returns:
-        The offset, m.
-    """
-    tuned = alpha * (theta * jnp.cos(phi_pos) + theta_dot / omega * jnp.sin(phi_pos))
-    return A * jnp.sin(tuned)
