@@ -1,4 +1,4 @@
-"""Programming gaits into the SCPG with the stochastic supervised rule (Alg. 1).
+"""Programming gaits into the SCPG with the stochastic supervised rule (Alg. 1 of the hexapod SCPG paper).
 
 How gaits are trained (the order and interleaving of Alg. 1, made precise):
 

@@ -62,7 +62,7 @@ _ODD = (jnp.arange(1, N_JOINTS + 1) % 2 == 1)
 
 
 class GaitParams(NamedTuple):
-    """Parameters of Eq. (1); every field is a traced scalar, so a sweep can vmap over any of them.
+    """Parameters of Eq. (1) of the snake R-STDP paper; every field is a traced scalar a sweep can vmap over.
 
     Angles in rad, frequencies in rad/s (temporal) or rad per joint number
     (spatial). ``P_i`` (the paper's "linear dependency") is the linear ramp from
@@ -126,7 +126,7 @@ def gait_period(params: GaitParams) -> jax.Array:
 
 
 def _eq1(params: GaitParams, t, C_o) -> jax.Array:
-    """Eq. (1) for all 16 joints, with the lateral offset ``C_o``."""
+    """Eq. (1) of the snake R-STDP paper for all 16 joints, with the lateral offset ``C_o``."""
     P = params.P_head + (params.P_tail - params.P_head) * (_I - 1) / (N_JOINTS - 1)
     odd = P * params.A_o * jnp.sin(_I * params.Omega_o + t * params.omega_o + params.delta_o) + C_o
     even = P * params.A_e * jnp.sin(_I * params.Omega_e + t * params.omega_e) + params.C_e
@@ -156,19 +156,20 @@ def head_compensation(alpha: jax.Array) -> jax.Array:
 
 
 def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=True) -> jax.Array:
-    """Position-servo targets of the 16 joints at time ``t``: Eq. (1), steered and head-compensated.
+    """Position-servo targets of the 16 joints at ``t``: Eq. (1) of the snake R-STDP paper, steered, head-compensated.
 
     Args:
         params: the gait (`default_gait`); its ``C_o`` is replaced by ``steer``.
         t: time, s (scalar).
-        steer: ``C_o`` of Eq. (1), rad: the steering input. With the default
-            gait a positive ``steer`` turns the snake clockwise (to the right).
+        steer: ``C_o`` of Eq. (1) of the snake R-STDP paper, rad: the steering
+            input. With the default gait a positive ``steer`` turns the snake
+            clockwise (to the right).
         head_offset: added to the first (head yaw) joint, rad, after the
             compensation: the head controller's command. The head's yaw
             relative to module 1 is ``-alpha_1``, so a positive offset turns
             the head to the right.
         compensate: replace the first joint's Eq. (1) target by
-            `head_compensation` of the others (the paper's head compensation);
+            `head_compensation` of the others (the snake R-STDP paper's head compensation);
             ``False`` gives Eq. (1) unchanged (plus ``head_offset``).
 
     Returns:
