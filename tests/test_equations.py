@@ -1,6 +1,6 @@
 """The equation index (docs/EQUATIONS.md) names real code and real tests, and no equation reference is bare.
 
-Two checks:
+Three checks:
 
 1. Every row of the table in ``docs/EQUATIONS.md`` either names its home, one or
    more `` `module:name` `` (or `` `module.name` ``) that import (the module
@@ -32,6 +32,10 @@ Two checks:
    in its own docstrings, unless a docstring (or comment run) names another
    paper too; a module that names none or several must name the paper in the
    sentence of each reference, or in a block that alone names one paper.
+
+3. Every equation or algorithm the code cites, attributed to one paper by that
+   rule, has a row of that paper in the index whose "Equation" cell covers its
+   number ("Eq. (4)-(6)" covers 4, 5 and 6).
 """
 
 from __future__ import annotations
@@ -55,7 +59,10 @@ PAPERS = {
     "pipe-tracking": re.compile(r"\bpipe-tracking\s+paper\b"),
     "snake R-STDP": re.compile(r"\bR-STDP\s+paper\b"),
 }
-REFERENCE = re.compile(r"\b(?:Eqs?\.|Equations?)\s*\(?\d|\bAlg(?:s?\.|orithms?)\s*\d")
+REFERENCE = re.compile(
+    r"\b(?:(?P<eq>Eqs?\.|Equations?)\s*(?P<eqs>\(?\d+\)?(?:\s*(?:-|,|and)\s*\(?\d+\)?)*)"
+    r"|(?P<alg>Alg(?:s?\.|orithms?))\s*(?P<algs>\d+(?:\s*(?:-|,|and)\s*\d+)*))"
+)
 ABBREVIATIONS = ("Eqs.", "Eq.", "Algs.", "Alg.", "Secs.", "Sec.", "Figs.", "Fig.", "e.g.", "i.e.", "et al.", "cf.",
                  "vs.", "ref.", "Ref.", "resp.", "approx.")
 _SENTENCE_END = re.compile(r"[.!?](?=\s)|\n\s*\n|\n(?=\s*(?:[-*]|\d+[.)])\s)")
@@ -200,8 +207,24 @@ def _sentence(text: str, masked: str, offset: int) -> str:
     return text[(starts[-1] if starts else 0):(ends[0] + 1 if ends else len(text))]
 
 
-def bare_references(source: str) -> list[tuple[int, str]]:
-    """The references of ``source`` that the rule of this module's docstring calls ambiguous, as (line, sentence)."""
+def _numbers(match: re.Match) -> set[tuple[str, int]]:
+    """``{("Eq", 4), ("Eq", 5), ("Eq", 6)}`` for "Eqs. (4)-(6)", ``{("Alg", 1)}`` for "Alg. 1"."""
+    kind, spec = ("Eq", match["eqs"]) if match["eq"] else ("Alg", match["algs"])
+    found = set()
+    for part in re.split(r"\s*(?:,|and)\s*", spec):
+        bounds = [int(n) for n in re.findall(r"\d+", part)]
+        found.update((kind, n) for n in range(bounds[0], bounds[-1] + 1))
+    return found
+
+
+def references(source: str) -> list[tuple[int, str, str | None, set[tuple[str, int]]]]:
+    """Every reference of ``source`` as (line, sentence, paper, numbers).
+
+    ``paper`` is the paper the rule of this module's docstring gives it: the one
+    its sentence names, or else the one its block and module name together;
+    ``None`` when that is not exactly one paper (when the sentence names several,
+    the reference is unambiguous to a reader but not attributed here).
+    """
     docstring, blocks = _blocks(source)
     module_papers = _papers(docstring)
     found = []
@@ -210,28 +233,70 @@ def bare_references(source: str) -> list[tuple[int, str]]:
         masked = _mask(text)
         for match in REFERENCE.finditer(text):
             sentence = _sentence(text, masked, match.start())
-            if _papers(sentence) or len(block_papers | module_papers) == 1:
-                continue
-            found.append((first_line + text.count("\n", 0, match.start()), " ".join(sentence.split())))
+            papers = _papers(sentence) or block_papers | module_papers
+            line = first_line + text.count("\n", 0, match.start())
+            paper = next(iter(papers)) if len(papers) == 1 else None
+            found.append((line, " ".join(sentence.split()), paper, _numbers(match)))
     return found
+
+
+def bare_references(source: str) -> list[tuple[int, str]]:
+    """The references of ``source`` that the rule of this module's docstring calls ambiguous, as (line, sentence)."""
+    found = []
+    for line, sentence, paper, _ in references(source):
+        if paper is None and not _papers(sentence):
+            found.append((line, sentence))
+    return found
+
+
+def _sources():
+    for package in SOURCES:
+        yield from sorted((ROOT / package).rglob("*.py"))
 
 
 def test_the_rule_by_hand():
     one = '"""Decoders, Eq. (8) of the RoboBee paper."""\n\ndef f():\n    """Eq. (8) again: bare is fine here."""\n'
     assert bare_references(one) == []
-    other = one + '\ndef g():\n    """Eq. (9). Unlike the snake R-STDP paper, which uses Eq. (3) of the pipe-tracking paper."""\n'
+    other = one + '\ndef g():\n    """Eq. (9). Unlike the snake R-STDP paper, '
+    other += 'which uses Eq. (3) of the pipe-tracking paper."""\n'
     assert [line for line, _ in bare_references(other)] == [7]
-    none = '"""No paper here."""\n# Eq. (2) of the pipe-tracking paper, and\n# Eq. (3): one comment block, one paper.\nx = 1  # Alg. 1\n'
+    none = '"""No paper here."""\n# Eq. (2) of the pipe-tracking paper, and\n'
+    none += '# Eq. (3): one comment block, one paper.\nx = 1  # Alg. 1\n'
     assert [line for line, _ in bare_references(none)] == [4]
     two = '"""Gait and camera.\n\nSee Eq. (5), e.g. Sec. 2.4 and Fig. 3 of the pipe-tracking paper. Then Eq. 6.\n\n'
     two += '- Eq. (1) of the snake R-STDP\n  paper.\n- Eq. (12)\n"""\n'
     assert [sentence for _, sentence in bare_references(two)] == ["Then Eq. 6.", "- Eq. (12)"]
 
 
+def test_reference_numbers():
+    source = '"""Eqs. (4)-(6) and Eq. (1), (9) of the pipe-tracking paper; Alg. 3, line 11 of the RoboBee paper."""'
+    got = {(paper, frozenset(numbers)) for _, _, paper, numbers in references(source)}
+    assert got == {(None, frozenset({("Eq", 4), ("Eq", 5), ("Eq", 6)})), (None, frozenset({("Eq", 1), ("Eq", 9)})),
+                   (None, frozenset({("Alg", 3)}))}
+    source = '"""Eq. 7 of the snake R-STDP paper, then Algorithm 2."""'
+    assert [(paper, numbers) for _, _, paper, numbers in references(source)] == [
+        ("snake R-STDP", {("Eq", 7)}), ("snake R-STDP", {("Alg", 2)})]
+
+
 def test_every_equation_reference_names_its_paper():
     problems = []
-    for package in SOURCES:
-        for path in sorted((ROOT / package).rglob("*.py")):
-            for line, sentence in bare_references(path.read_text()):
-                problems.append(f"{path.relative_to(ROOT)}:{line}: {sentence[:150]}")
+    for path in _sources():
+        for line, sentence in bare_references(path.read_text()):
+            problems.append(f"{path.relative_to(ROOT)}:{line}: {sentence[:150]}")
     assert not problems, "references that do not name their paper:\n" + "\n".join(problems)
+
+
+def test_every_equation_the_code_cites_has_a_row():
+    """Each equation or algorithm a docstring or comment cites, with its paper, is in docs/EQUATIONS.md."""
+    indexed = set()
+    for _, cells in _rows():
+        for match in REFERENCE.finditer(cells[1]):
+            indexed.update((cells[0], kind, n) for kind, n in _numbers(match))
+    problems = []
+    for path in _sources():
+        for line, sentence, paper, numbers in references(path.read_text()):
+            for kind, n in sorted(numbers):
+                if paper is not None and (paper, kind, n) not in indexed:
+                    where = f"{path.relative_to(ROOT)}:{line}"
+                    problems.append(f"{where}: {kind}. {n} of the {paper} paper: {sentence[:100]}")
+    assert not problems, "cited but not in docs/EQUATIONS.md:\n" + "\n".join(problems)
