@@ -15,8 +15,8 @@ from spikejax.errors import UserError
 
 __all__ = [
     "DecoderParams",
-    "antagonist_currents",
     "DecoderState",
+    "antagonist_currents",
     "decoder_init",
     "decoder_step",
     "poisson_spikes",
