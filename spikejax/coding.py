@@ -11,9 +11,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax.errors import UserError
+
 __all__ = [
     "DecoderParams",
     "DecoderState",
+    "antagonist_currents",
     "decoder_init",
     "decoder_step",
     "poisson_spikes",
@@ -127,6 +130,48 @@ def shift_scale(q: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
         1.0
     """
     return a * (q + b)
+
+
+def antagonist_currents(q_hat: jax.Array, n_per_group: int, gain) -> jax.Array:
+    """Input currents of groups of neurons split into antagonist halves, one group per signal.
+
+    The RoboBee paper (Section III) feeds each shifted and scaled state variable
+    ``q_hat_g`` (`shift_scale`) to its own input group. Here the first
+    ``n_per_group // 2`` neurons of group ``g`` get the current ``gain * q_hat_g``
+    and the other ``n_per_group - n_per_group // 2`` get ``gain * (1 - q_hat_g)``:
+    whichever way ``q_g`` moves, one half of the group is driven harder, so the
+    group never falls silent as a whole and a presynaptic learning rule can push
+    the output both ways. The halves are this project's addition to the paper's
+    encoder (with one-sided groups a large negative error silenced a whole group
+    and the RoboBee's SNN flight tumbled); each neuron's own threshold then makes
+    it a different rectified feature of ``q_g``.
+
+    Args:
+        q_hat: the shifted and scaled signals, shape ``(n_groups,)``.
+        n_per_group: neurons per group (static), >= 1; with 1 the group is one
+            antagonist neuron.
+        gain: current per unit of ``q_hat``, broadcasting with a scalar.
+
+    Returns:
+        Currents, shape ``(n_groups * n_per_group,)``, group-major: neuron
+        ``n`` belongs to group ``n // n_per_group`` and is antagonist when
+        ``n % n_per_group >= n_per_group // 2``.
+
+    Raises:
+        UserError: if ``n_per_group`` is not an int >= 1.
+
+    Examples:
+        >>> antagonist_currents(jnp.array([0.25, 1.5]), 3, 2.0).tolist()
+        [0.5, 1.5, 1.5, 3.0, -1.0, -1.0]
+    """
+    if isinstance(n_per_group, bool) or not isinstance(n_per_group, int) or n_per_group < 1:
+        raise UserError(f"n_per_group must be an int >= 1, got {n_per_group!r}")
+    half = n_per_group // 2
+    q_hat = jnp.asarray(q_hat)
+    drive = jnp.concatenate(
+        [jnp.repeat(q_hat[:, None], half, 1), jnp.repeat(1.0 - q_hat[:, None], n_per_group - half, 1)], axis=1
+    )
+    return gain * drive.reshape(-1)
 
 
 class DecoderParams(NamedTuple):

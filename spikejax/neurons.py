@@ -91,7 +91,7 @@ class LIFParams(NamedTuple):
     Attributes:
         tau: membrane time constant, s, > 0.
         r: membrane resistance, ohm; ``r * I`` is in volts.
-        v_th: threshold, V; the neuron fires when ``v >= v_th`` (Eq. (7)).
+        v_th: threshold, V; the neuron fires when ``v >= v_th`` (Eq. (7) of the RoboBee paper).
         v_reset: potential after a spike, V (the paper's rest value ``v_r``).
         v_rest: resting potential, V; the potential relaxes to
             ``v_inf = v_rest + r * I``.
@@ -250,7 +250,7 @@ def lif_step(
 
 
 def lif_rate(params: LIFParams, current: jax.Array) -> jax.Array:
-    """Closed-form firing rate (f-I curve) of the noiseless LIF of Eq. (6)-(7).
+    """Closed-form firing rate (f-I curve) of the noiseless LIF of Eq. (6)-(7) of the RoboBee paper.
 
     ``f = 1 / (t_ref + tau ln((v_inf - v_reset) / (v_inf - v_th)))`` with
     ``v_inf = v_rest + R I`` when ``v_inf > v_th``, else 0 (below rheobase the
@@ -275,10 +275,10 @@ def lif_rate(params: LIFParams, current: jax.Array) -> jax.Array:
 
 
 def lif_first_spike_time(params: LIFParams, current: jax.Array, v0: jax.Array) -> jax.Array:
-    """Time for the noiseless LIF of Eq. (6) to reach ``v_th`` from ``v0``.
+    """Time for the noiseless LIF of Eq. (6) of the RoboBee paper to reach ``v_th`` from ``v0``.
 
     ``T = tau ln((v_inf - v0) / (v_inf - v_th))`` with ``v_inf = v_rest + R I``,
-    the continuous-time firing time of Eq. (7) under a constant current; 0 when
+    the continuous-time firing time of the RoboBee paper's Eq. (7) under a constant current; 0 when
     ``v0 >= v_th`` and ``inf`` when ``v_inf <= v_th`` (never). A simulation
     started from ``v0`` at ``t = 0`` stamps that spike at step
     ``k = ceil(T / dt) - 1`` (see `lif_step`), so ``k dt`` is within ``dt`` of ``T``.

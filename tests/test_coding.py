@@ -1,4 +1,4 @@
-"""Encoders: Poisson generators against their exact statistics; shift-and-scale."""
+"""Encoders: Poisson generators against their exact statistics; shift-and-scale; antagonist halves."""
 
 from __future__ import annotations
 
@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from spikejax.coding import antagonist_currents
 from spikejax.coding import poisson_spikes
 from spikejax.coding import poisson_train
 from spikejax.coding import shift_scale
+from spikejax.errors import UserError
 
 # Deviations larger than this many standard errors fail a statistical test.
 N_SE = 4.0
@@ -119,3 +121,18 @@ def test_shift_scale_hand_values_and_broadcasting():
     b = jnp.array([1.0, 3.0, 0.0])
     np.testing.assert_allclose(shift_scale(q, a, b), [[0.0, 3.0, 1.0], [3.0, 2.5, 0.5]])
     assert float(shift_scale(jnp.float32(-0.5), 2.0, 1.0)) == 1.0
+
+
+def test_antagonist_currents_by_hand():
+    """Two groups of 5 (halves of 2 and 3) and one of 1 (all antagonist), gain 0.5, after `shift_scale`."""
+    q_hat = shift_scale(jnp.array([0.1, -0.3]), jnp.array([2.0, 1.0]), jnp.array([0.4, 0.1]))  # [1.0, -0.2]
+    got = np.asarray(antagonist_currents(q_hat, 5, jnp.float32(0.5)))
+    # group 0: q_hat 1.0 -> 0.5 twice, then 0.5 * (1 - 1.0) = 0 three times; group 1: q_hat -0.2 -> -0.1, 0.6.
+    np.testing.assert_allclose(got, [0.5, 0.5, 0.0, 0.0, 0.0, -0.1, -0.1, 0.6, 0.6, 0.6], atol=1e-7)
+    np.testing.assert_allclose(np.asarray(antagonist_currents(jnp.array([0.25, 0.75]), 1, 2.0)), [1.5, 0.5])
+
+
+@pytest.mark.parametrize("n", [0, -1, 2.0, True])
+def test_antagonist_currents_rejects_bad_group_sizes(n):
+    with pytest.raises(UserError, match="n_per_group"):
+        antagonist_currents(jnp.zeros(2), n, 1.0)

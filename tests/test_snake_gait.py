@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from robots.snake.gait import JOINT_LIMIT
-from robots.snake.gait import camera_offset
 from robots.snake.gait import default_gait
 from robots.snake.gait import gait_period
 from robots.snake.gait import head_compensation
 from robots.snake.gait import joint_targets
 from robots.snake.physics import make_physics
+from spikejax.vision.pipe import camera_offset
 
 
 def test_eq1_by_hand():
@@ -56,7 +56,23 @@ def test_camera_offset_eq6_phase_identity():
     for t in (0.0, 0.3, 1.1):
         theta, theta_dot = a * math.sin(w * t + phi), a * w * math.cos(w * t + phi)
         expected = A * math.sin(alpha * a * math.sin(w * t + phi + phi_pos))
-        assert float(camera_offset(theta, theta_dot, w, A, alpha, phi_pos)) == pytest.approx(expected, abs=1e-5)
+        got = camera_offset(theta, theta_dot, swing_amplitude=A, ratio=alpha, phase=phi_pos, omega=w)
+        assert float(got) == pytest.approx(expected, abs=1e-5)
+
+
+def test_camera_offset_on_the_snakes_head_joint():
+    """Eq. (4)-(6) of the pipe-tracking paper fed with this gait's head joint (Eq. (1), uncompensated, and its rate).
+
+    The head joint of `default_gait` is Eq. (4) with ``a = A_o``, ``omega = omega_o``,
+    ``phi = Omega_o + delta_o``; the camera offset from its angle and rate is the phase-shifted swing.
+    """
+    p = default_gait()
+    A, alpha, phi_pos = 1.4, math.radians(90) / p.A_o, 0.908
+    for t in (0.0, 0.4, 1.3, 2.2):
+        theta, theta_dot = jax.jvp(lambda s: joint_targets(p, s, compensate=False)[0], (t,), (1.0,))
+        got = camera_offset(theta, theta_dot, swing_amplitude=A, ratio=alpha, phase=phi_pos, omega=p.omega_o)
+        expected = A * math.sin(alpha * p.A_o * math.sin(p.omega_o * t + p.Omega_o + p.delta_o + phi_pos))
+        assert float(got) == pytest.approx(expected, abs=1e-5), t
 
 
 # ----------------------------------------------------------------- on the robot

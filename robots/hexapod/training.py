@@ -1,4 +1,4 @@
-"""Programming gaits into the SCPG with the stochastic supervised rule (Alg. 1).
+"""Programming gaits into the SCPG with the stochastic supervised rule (Alg. 1 of the hexapod SCPG paper).
 
 How gaits are trained (the order and interleaving of Alg. 1, made precise):
 
@@ -30,14 +30,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax import DiscreteLIFParams, discrete_lif_step
+from spikejax import DiscreteLIFParams
 from spikejax.random import hash_seed, hash_uniform
 from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
-from robots.hexapod.cpg import RECURRENT_MASK, CPGState, CPGWeights, init_weights, rest_state, run_gait
+from robots.hexapod.cpg import RECURRENT_MASK, CPGWeights, cpg_step, init_weights, rest_state, run_gait
 from robots.hexapod.gaits import N_GAITS, N_LEGS, PATTERNS, PERIOD
 
 _RULE = stochastic_supervised()
-_ONE = jnp.ones((1,), jnp.float32)
 
 
 class TrainParams(NamedTuple):
@@ -86,20 +85,19 @@ def _presentation(
     rule = StochasticSupervisedParams(lr=params.lr * learn)
     n_steps = noise.shape[0]
     targets = jnp.asarray(PATTERNS[gait][np.arange(n_steps) % PERIOD])
+    gait_spikes = jax.nn.one_hot(gait, N_GAITS, dtype=jnp.float32)  # G(gait) alone spikes, every step
 
     def step(carry, inputs):
-        w_in_g, w_cpg, state = carry
+        weights, state, rule_in, rule_cpg = carry
         target, u = inputs
-        # Only G(gait) spikes, so the input current is its row of w_in (cpg_step, specialised).
-        neurons, spikes = discrete_lif_step(neuron, state.neurons, w_in_g + state.spikes @ w_cpg)
-        dw_in, _ = _RULE.update(rule, None, w_in_g, _ONE, spikes, target, u[0])
-        dw_cpg, _ = _RULE.update(rule, None, w_cpg, state.spikes, spikes, target, u[1])
-        carry = (w_in_g + dw_in[0], w_cpg + dw_cpg * RECURRENT_MASK, CPGState(neurons, spikes))
-        return carry, jnp.sum(jnp.abs(spikes - target))
+        new_state, spikes = cpg_step(neuron, weights, state, gait_spikes)
+        dw_in, rule_in = _RULE.update(rule, rule_in, weights.w_in, gait_spikes, spikes, target, u[0])
+        dw_cpg, rule_cpg = _RULE.update(rule, rule_cpg, weights.w_cpg, state.spikes, spikes, target, u[1])
+        weights = CPGWeights(weights.w_in + dw_in, weights.w_cpg + dw_cpg * RECURRENT_MASK)
+        return (weights, new_state, rule_in, rule_cpg), jnp.sum(jnp.abs(spikes - target))
 
-    carry = (weights.w_in[gait], weights.w_cpg, rest_state())
-    (w_in_g, w_cpg, _), errors = jax.lax.scan(step, carry, (targets, noise))
-    weights = CPGWeights(weights.w_in.at[gait].set(w_in_g), w_cpg)
+    carry = (weights, rest_state(), _RULE.init(weights.w_in), _RULE.init(weights.w_cpg))
+    (weights, _, _, _), errors = jax.lax.scan(step, carry, (targets, noise))
     return weights, jnp.sum(errors) * learn
 
 

@@ -38,6 +38,7 @@ import jax.numpy as jnp
 
 from spikejax.coding import DecoderParams
 from spikejax.coding import DecoderState
+from spikejax.coding import antagonist_currents
 from spikejax.coding import decoder_init
 from spikejax.coding import decoder_step
 from spikejax.coding import shift_scale
@@ -405,8 +406,8 @@ def controller_step(
     1. Encoding (Section III): ``q_hat = a (q + b)``; in each group of
        ``n_per_input`` neurons, the first half gets the current
        ``input_gain * q_hat_g`` and the second half ``input_gain * (1 - q_hat_g)``
-       (antagonist halves), each threshold making a neuron a different rectified
-       feature of ``q_g``.
+       (antagonist halves, `spikejax.coding.antagonist_currents`), each threshold
+       making a neuron a different rectified feature of ``q_g``.
     2. The input, hidden and output layers take one exact LIF step each
        (Eq. (6)-(7)); a layer's spikes of this step drive the next layer in the
        same step, with current ``syn * W^T spikes``.
@@ -432,15 +433,7 @@ def controller_step(
         units of `TORQUE_UNIT`, shape ``()``.
     """
     q_hat = shift_scale(q_lateral, params.a, params.b)
-    # Antagonist halves: the first half of each group is driven by q_hat, the second by
-    # 1 - q_hat, so some neurons stay active whichever way a variable moves and the
-    # presynaptic rule can push the output both ways (with one-sided encoding, a large
-    # negative error silenced a whole group and the SNN flight tumbled).
-    half = config.n_per_input // 2
-    drive = jnp.concatenate(
-        [jnp.repeat(q_hat[:, None], half, 1), jnp.repeat(1.0 - q_hat[:, None], config.n_per_input - half, 1)], axis=1
-    )
-    current_in = params.input_gain * drive.reshape(-1)
+    current_in = antagonist_currents(q_hat, config.n_per_input, params.input_gain)
     p_in = _lif(params, params.tau_input, state.v_th_input)
     p_h = _lif(params, params.tau_hidden, state.v_th_hidden)
     p_out = _lif(params, params.tau_output, state.v_th_output)

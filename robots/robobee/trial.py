@@ -23,8 +23,8 @@ class FlightTrialParams(NamedTuple):
 
     Attributes:
         landing: 0 for flight 1 (q0 -> q1 -> q2), 1 for flight 2 (the landing).
-        mu: learning rate of Eq. (10), both weight layers.
-        tau_reward: reward time constant of Eq. (9), s.
+        mu: learning rate of Eq. (10) of the RoboBee paper, both weight layers.
+        tau_reward: reward time constant of Eq. (9) of the RoboBee paper, s.
         spread: robot randomisation: mass, drag and inertia each scaled by
             ``U(1 - spread, 1 + spread)``; the controllers keep the nominal model.
         use_snn: 1 for the SNN steering (learning online), 0 for the LQR teacher.

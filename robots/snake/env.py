@@ -5,7 +5,7 @@
 drive it as they drive their own envs, and the SNN controllers of the snake
 papers drive it through the same ``reset`` / ``step``.
 
-One ``step`` is one control step (20 ms, the paper's): the gait of Eq. (1)
+One ``step`` is one control step (20 ms, the snake R-STDP paper's): the gait of Eq. (1)
 (:func:`robots.snake.gait.joint_targets`) is evaluated at the step's start
 with the action's steering and head offset and held by the servos while the
 physics backend (``"mujoco"`` or ``"mjx"``, :func:`robots.snake.physics.make_physics`)

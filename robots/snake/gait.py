@@ -26,7 +26,7 @@ kinematics rather than a fitted curve: the first joint is set so that the head
 points along the mean heading of the 17 modules (`head_compensation`), which is
 the body's direction of motion averaged over the wave. Eq. (4)-(6) of the
 pipe-tracking paper (the camera's sideways offset estimated from the head
-joint) are in `camera_offset`.
+joint) are in `spikejax.vision.pipe.camera_offset`.
 
 Sign conventions (those of ``snake.xml``): ``alpha_i > 0`` turns module ``i``
 to the left (odd ``i``, about ``+z``) or about ``+y`` (even ``i``) relative to
@@ -48,7 +48,6 @@ __all__ = [
     "JOINT_LIMIT",
     "N_JOINTS",
     "GaitParams",
-    "camera_offset",
     "default_gait",
     "gait_period",
     "head_compensation",
@@ -63,7 +62,7 @@ _ODD = (jnp.arange(1, N_JOINTS + 1) % 2 == 1)
 
 
 class GaitParams(NamedTuple):
-    """Parameters of Eq. (1); every field is a traced scalar, so a sweep can vmap over any of them.
+    """Parameters of Eq. (1) of the snake R-STDP paper; every field is a traced scalar a sweep can vmap over.
 
     Angles in rad, frequencies in rad/s (temporal) or rad per joint number
     (spatial). ``P_i`` (the paper's "linear dependency") is the linear ramp from
@@ -127,7 +126,7 @@ def gait_period(params: GaitParams) -> jax.Array:
 
 
 def _eq1(params: GaitParams, t, C_o) -> jax.Array:
-    """Eq. (1) for all 16 joints, with the lateral offset ``C_o``."""
+    """Eq. (1) of the snake R-STDP paper for all 16 joints, with the lateral offset ``C_o``."""
     P = params.P_head + (params.P_tail - params.P_head) * (_I - 1) / (N_JOINTS - 1)
     odd = P * params.A_o * jnp.sin(_I * params.Omega_o + t * params.omega_o + params.delta_o) + C_o
     even = P * params.A_e * jnp.sin(_I * params.Omega_e + t * params.omega_e) + params.C_e
@@ -157,19 +156,20 @@ def head_compensation(alpha: jax.Array) -> jax.Array:
 
 
 def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=True) -> jax.Array:
-    """Position-servo targets of the 16 joints at time ``t``: Eq. (1), steered and head-compensated.
+    """Position-servo targets of the 16 joints at ``t``: Eq. (1) of the snake R-STDP paper, steered, head-compensated.
 
     Args:
         params: the gait (`default_gait`); its ``C_o`` is replaced by ``steer``.
         t: time, s (scalar).
-        steer: ``C_o`` of Eq. (1), rad: the steering input. With the default
-            gait a positive ``steer`` turns the snake clockwise (to the right).
+        steer: ``C_o`` of Eq. (1) of the snake R-STDP paper, rad: the steering
+            input. With the default gait a positive ``steer`` turns the snake
+            clockwise (to the right).
         head_offset: added to the first (head yaw) joint, rad, after the
             compensation: the head controller's command. The head's yaw
             relative to module 1 is ``-alpha_1``, so a positive offset turns
             the head to the right.
         compensate: replace the first joint's Eq. (1) target by
-            `head_compensation` of the others (the paper's head compensation);
+            `head_compensation` of the others (the snake R-STDP paper's head compensation);
             ``False`` gives Eq. (1) unchanged (plus ``head_offset``).
 
     Returns:
@@ -188,30 +188,3 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
     alpha = alpha.at[0].set(head + head_offset)
     return jnp.clip(alpha, -JOINT_LIMIT, JOINT_LIMIT)
 
-
-def camera_offset(theta, theta_dot, omega, A, alpha, phi_pos) -> jax.Array:
-    """The camera's sideways offset from the head joint, Eq. (4)-(6) of the pipe-tracking paper.
-
-    The head joint follows ``theta = a sin(omega t + phi)`` (Eq. (4)); shifting
-    its phase by ``phi_pos`` and scaling by ``alpha`` (Eq. (5)),
-
-    .. math:: \\theta_{tuned} = \\alpha (\\theta \\cos\\phi_{pos} + (\\theta'/\\omega) \\sin\\phi_{pos}),
-
-    and the offset perpendicular to the direction of motion is
-    ``A sin(theta_tuned)`` (Eq. (6)). Eq. (5) of the paper writes ``theta'``
-    for the phase-quadrature term; the exact identity needs ``theta' / omega``,
-    which is what is used here.
-
-    Args:
-        theta: head joint angle, rad.
-        theta_dot: its rate, rad/s.
-        omega: the gait's temporal frequency, rad/s.
-        A: amplitude of the sideways swing, m (the paper: -0.124 for V-REP, 1.400 for NRP).
-        alpha: ratio of 90 deg to the joint amplitude ``a`` (1.000 and 2.571).
-        phi_pos: phase difference, rad (0.000 and 0.908).
-
-    Returns:
-        The offset, m.
-    """
-    tuned = alpha * (theta * jnp.cos(phi_pos) + theta_dot / omega * jnp.sin(phi_pos))
-    return A * jnp.sin(tuned)

@@ -351,9 +351,9 @@ def camera_offset(angle, velocity, swing_amplitude, ratio, phase, omega):
     Args:
         angle: ``theta``, head joint angle, rad.
         velocity: ``theta'``, head joint velocity, rad/s.
-        swing_amplitude: ``A``, metres (its sign sets the direction).
-        ratio: ``alpha``, "the ratio of the 90 degrees to ``a``".
-        phase: ``phi_pos``, rad.
+        swing_amplitude: ``A``, metres (its sign sets the direction; the paper: -0.124 for V-REP, 1.400 for NRP).
+        ratio: ``alpha``, "the ratio of the 90 degrees to ``a``" (1.000 and 2.571).
+        phase: ``phi_pos``, rad (0.000 and 0.908).
         omega: the gait's angular frequency, rad/s.
 
     Returns:
