@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import argparse
 import csv
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
+from importlib import resources
+from importlib.resources.abc import Traversable
 from pathlib import Path
 
 import numpy as np
@@ -13,19 +14,34 @@ import numpy as np
 from spikejax.errors import UserError
 from spikejax.sweep import load_sweep, read_results, run_sweep
 
-SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
+# The sweep files of the reproductions, shipped as package data of ``robots``
+# (``sweeps/`` of the repository; see pyproject.toml), so that an installed
+# wheel finds them as a source checkout does.
+SWEEPS: Traversable = resources.files("robots") / "sweeps"
 
 
-def run_named_sweep(name: str, out: Path, args: argparse.Namespace) -> dict[str, np.ndarray]:
-    """Run (or resume) ``sweeps/NAME.toml`` into ``out/sweeps/NAME`` and return its table.
+def sweep_file(name: str) -> Traversable:
+    """The shipped sweep file ``NAME.toml`` (a UserError if there is none)."""
+    file = SWEEPS / f"{name}.toml"
+    if not file.is_file():
+        raise UserError(f"no sweep file {name}.toml among the package data of robots ({SWEEPS})")
+    return file
 
-    ``args`` carries the CLI's ``trials``, ``chunk_size`` and ``no_progress``.
+
+def run_named_sweep(name: str, out: Path, *, trials: int | None = None, chunk_size: int | None = None,
+                    progress: bool = True) -> dict[str, np.ndarray]:
+    """Run (or resume) the shipped sweep ``NAME.toml`` into ``out/sweeps/NAME`` and return its table.
+
+    Args:
+        name: the sweep file's name without ``.toml`` (``gait_convergence``).
+        out: the reproduction's output directory.
+        trials: seeds per condition (default: the sweep file's).
+        chunk_size: trials per compiled batch (default: the sweep file's).
+        progress: show a progress bar.
     """
-    path = SWEEPS / f"{name}.toml"
-    if not path.exists():
-        raise UserError(f"sweep file {path} not found (install spikejax from its source tree: pip install -e .)")
-    spec = load_sweep(path, seeds=args.trials, chunk_size=args.chunk_size)
-    run_sweep(spec, out / "sweeps" / name, progress=not args.no_progress)
+    with resources.as_file(sweep_file(name)) as path:
+        spec = load_sweep(path, seeds=trials, chunk_size=chunk_size)
+        run_sweep(spec, out / "sweeps" / name, progress=progress)
     return read_results(out / "sweeps" / name)
 
 

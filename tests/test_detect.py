@@ -6,6 +6,7 @@ pinhole camera with a 60 degree field of view (focal length 110.85 pixels on
 128 columns): a pipe of diameter ``l`` at distance ``d`` is ``f l / d`` pixels wide.
 """
 
+import ast
 import math
 
 import jax
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 from spikejax import cli
+from spikejax.commands import detect_pipe
 from spikejax.vision import detect, dvs, io, scenes
 from spikejax.vision import pipe as pp
 
@@ -179,3 +181,28 @@ def test_async_circles_warn_that_they_are_slow(tmp_path, capsys):
     assert "asynchronous circle detection is slow" in capsys.readouterr().err
     assert cli.main(["detect", "pipe", str(tmp_path / "few.npy"), "--shapes", "circles", "--no-progress"]) == 0
     assert "slow" not in capsys.readouterr().err
+
+
+def test_the_library_module_imports_no_app_code():
+    tree = ast.parse(open(detect.__file__).read())
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    app = {"argparse", "csv", "matplotlib", "spikejax.cli", "spikejax.commands", "robots"}
+    assert not {name for name in imported if name.split(".")[0] in app or name in app}
+    assert not {"main", "format_table", "write_csv", "overlay"} & set(vars(detect))
+
+
+def test_format_table_and_csv(tmp_path):
+    rows = [dict(t=0.05, kind="body", theta_deg=90.0, width_px=24.0, pos_px=40.0, row_px=64.0, distance_m=1.155,
+                 offset_m=-0.1, control=-1, score=12.0),
+            dict(t=0.1, kind="entry", theta_deg=0.0, width_px=30.0, pos_px=50.0, row_px=60.0, distance_m=0.0,
+                 offset_m=0.0, control=1, score=3.0)]
+    assert detect_pipe.format_table([]) == "no pipe detected"
+    assert detect_pipe.format_table(rows).splitlines() == [
+        "    t (s) kind   theta  width    pos  distance  C spikes",
+        "    0.050 body    90.0   24.0   40.0   1.155 m -1     12",
+        "    0.100 entry    0.0   30.0   50.0         -  1      3",
+    ]
+    detect_pipe.write_csv(tmp_path / "d.csv", rows)
+    lines = (tmp_path / "d.csv").read_text().splitlines()
+    assert lines[0] == ",".join(detect_pipe.COLUMNS) and lines[2] == "0.1,entry,0.0,30.0,50.0,60.0,0.0,0.0,1,3.0"

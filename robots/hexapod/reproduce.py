@@ -19,15 +19,15 @@ factor, the initial weight range and the update scale.
 
 from __future__ import annotations
 
-import argparse
 import tomllib
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from spikejax.commands import Command, add_common
 from spikejax.stats import wilson_interval
-from robots.common import SWEEPS, run_named_sweep, write_csv
+from robots.common import run_named_sweep, sweep_file, write_csv
 
 
 # Fig. 4 and Sec. III-C: "> 80 %" for one and two gaits, "~ 20 %" for three (100 trials each).
@@ -38,8 +38,7 @@ PAPER_LIKE_BUDGET = 150
 
 
 def _fixed(name: str) -> dict:
-    with open(SWEEPS / f"{name}.toml", "rb") as file:
-        return tomllib.load(file).get("fixed", {})
+    return tomllib.loads(sweep_file(name).read_text(encoding="utf-8")).get("fixed", {})
 
 
 def summarize(table: dict[str, np.ndarray], by: list[str]) -> list[list]:
@@ -117,15 +116,28 @@ def _plot_gaits(path: Path, ours: list[list], blocked: list[list], budget: list[
     fig.savefig(path, dpi=120)
 
 
-def main(args: argparse.Namespace) -> int:
-    """``spikejax reproduce gaits --out DIR [--trials N]``."""
-    out = Path(args.out)
+def _add_arguments(parser) -> None:
+    add_common(parser, trials="seeds per condition (default: the sweep file's)", chunk_size=True)
+
+
+def run_gaits(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
+              no_progress: bool = False) -> int:
+    """``spikejax reproduce gaits --out DIR [--trials N]``: the files of the module docstring, and a table.
+
+    Args:
+        out: output directory.
+        trials: seeds per number of gaits (default: the sweep files').
+        chunk_size: trials per compiled batch (default: the sweep files').
+        no_progress: hide the progress bars.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    sweep = dict(trials=trials, chunk_size=chunk_size, progress=not no_progress)
     header = ["n_gaits", "trials", "converged", "fraction", "ci_low", "ci_high"]
-    table = run_named_sweep("gait_convergence", out, args)
+    table = run_named_sweep("gait_convergence", out, **sweep)
     ours = summarize(table, ["n_gaits"])
     write_csv(out / "gait_convergence.csv", header, ours)
-    blocked = summarize(run_named_sweep("gait_convergence_blocked", out, args), ["n_gaits"])
+    blocked = summarize(run_named_sweep("gait_convergence_blocked", out, **sweep), ["n_gaits"])
     write_csv(out / "gait_convergence_blocked.csv", header, blocked)
     budget = budget_curve(table, _fixed("gait_convergence")["max_epochs"])
     write_csv(out / "gait_convergence_budget.csv", ["n_gaits", "presentations", "epochs", "trials", "fraction"], budget)
@@ -171,11 +183,19 @@ def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, 
     fig.savefig(path, dpi=110)
 
 
-def main_choices(args: argparse.Namespace) -> int:
-    """``spikejax reproduce gait-choices --out DIR [--trials N]``."""
-    out = Path(args.out)
+def run_gait_choices(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
+                     no_progress: bool = False) -> int:
+    """``spikejax reproduce gait-choices --out DIR [--trials N]``: ``gait_choices.csv`` and ``.png``, and a table.
+
+    Args:
+        out: output directory.
+        trials: seeds per grid point (default: the sweep file's).
+        chunk_size: trials per compiled batch (default: the sweep file's).
+        no_progress: hide the progress bar.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("gait_choices", out, args)
+    table = run_named_sweep("gait_choices", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
     rows = summarize(table, ["alpha", "w_high", "lr"])
     for row in rows:
         m = (table["alpha"] == row[0]) & (table["w_high"] == row[1]) & (table["lr"] == row[2])
@@ -192,3 +212,17 @@ def main_choices(args: argparse.Namespace) -> int:
         print(f"  alpha={r[0]:g} w_high={r[1]:g} eta={r[2]:g}: {r[5]:.1%} [{r[6]:.1%}, {r[7]:.1%}]")
     print(f"wrote {out / 'gait_choices.csv'} and {out / 'gait_choices.png'}")
     return 0
+
+
+gaits_command = Command(
+    help="gait convergence, Fig. 4 of the hexapod SCPG paper (table + figure)",
+    add_arguments=_add_arguments,
+    run=run_gaits,
+    description="Fig. 4 of the hexapod SCPG paper: convergence of one, two and three gaits, with 95 % Wilson "
+                "intervals, for the interleaved and the blocked schedule, and against the training budget.",
+)
+gait_choices_command = Command(
+    help="three-gait convergence over alpha, the initial weights and the update scale",
+    add_arguments=_add_arguments,
+    run=run_gait_choices,
+)

@@ -21,7 +21,6 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import jax
@@ -29,14 +28,13 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
+from spikejax.commands import Command, add_common
 from spikejax.stats import wilson_interval
 from robots.common import run_named_sweep, write_csv
 from spikejax.sweep import trial_key
 from robots.robobee.controller import ControllerConfig, controller_params
-from robots.robobee.flight import flight_plan, fly
 from robots.robobee.lqr import altitude_gains
 from robots.robobee.params import default_params
-from robots.robobee.trial import nominal_gain
 
 FLIGHTS = {0: "flight 1 (q0 -> q1 -> q2)", 1: "flight 2 (landing)"}
 
@@ -67,6 +65,11 @@ HEADER = ["flight", "controller", "flights", "reached", "ci_low", "ci_high", "rm
 
 def _replay(landing: int, seed: int = 0):
     """Seed ``seed``'s flight with the SNN and the LQR steering, fully recorded."""
+    # Imported here: the flight's physics is MJX, and `spikejax reproduce` imports this module to
+    # list its flags beside the other reproductions'.
+    from robots.robobee.flight import flight_plan, fly
+    from robots.robobee.trial import nominal_gain
+
     robot = default_params()
     plan = flight_plan("landing" if landing else "waypoints")
     key_net, _ = jax.random.split(trial_key(0, seed))
@@ -131,11 +134,23 @@ def _plot_seeds(path: Path, table: dict[str, np.ndarray]) -> None:
     fig.savefig(path, dpi=110)
 
 
-def main(args: argparse.Namespace) -> int:
-    """``spikejax reproduce robobee --out DIR [--trials N]``."""
-    out = Path(args.out)
+def _add_arguments(parser) -> None:
+    add_common(parser, trials="seeds per condition (default: the sweep file's)", chunk_size=True)
+
+
+def run_flights(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
+                no_progress: bool = False) -> int:
+    """``spikejax reproduce robobee --out DIR [--trials N]``: the files of the module docstring, and a table.
+
+    Args:
+        out: output directory.
+        trials: network seeds per flight and controller (default: the sweep file's).
+        chunk_size: flights per compiled batch (default: the sweep file's).
+        no_progress: hide the progress bar.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_flights", out, args)
+    table = run_named_sweep("robobee_flights", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
     rows = flight_rows(table)
     write_csv(out / "robobee.csv", HEADER, rows)
     for landing in (0, 1):
@@ -183,23 +198,57 @@ def _success_map(out: Path, name: str, table: dict[str, np.ndarray], rows_axis: 
     return rows
 
 
-def main_learning(args: argparse.Namespace) -> int:
-    """``spikejax reproduce robobee-learning --out DIR [--trials N]``: success over mu and tau."""
-    out = Path(args.out)
+def run_learning(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
+                 no_progress: bool = False) -> int:
+    """``spikejax reproduce robobee-learning --out DIR [--trials N]``: success over mu and tau.
+
+    Args:
+        out: output directory.
+        trials: seeds (randomised robots) per grid point (default: the sweep file's).
+        chunk_size: flights per compiled batch (default: the sweep file's).
+        no_progress: hide the progress bar.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_learning", out, args)
+    table = run_named_sweep("robobee_learning", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
     _success_map(out, "robobee_learning", table, "mu", "tau_reward",
                  ("learning rate mu", "reward time constant tau (ms)"),
                  "flight 1, robots +-20 %: both waypoints reached (%)", ("{:g}".format, lambda tau: f"{1e3 * tau:g}"))
     return 0
 
 
-def main_populations(args: argparse.Namespace) -> int:
-    """``spikejax reproduce robobee-populations --out DIR [--trials N]``: success over the layer sizes."""
-    out = Path(args.out)
+def run_populations(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
+                    no_progress: bool = False) -> int:
+    """``spikejax reproduce robobee-populations --out DIR [--trials N]``: success over the layer sizes.
+
+    Args:
+        out: output directory.
+        trials: seeds (randomised robots) per grid point (default: the sweep file's).
+        chunk_size: flights per compiled batch (default: the sweep file's).
+        no_progress: hide the progress bar.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_populations", out, args)
+    table = run_named_sweep("robobee_populations", out, trials=trials, chunk_size=chunk_size,
+                            progress=not no_progress)
     _success_map(out, "robobee_populations", table, "n_per_input", "n_hidden",
                  ("input neurons per state variable", "hidden neurons"),
                  "flight 1, robots +-20 %, 50 output neurons: both waypoints reached (%)")
     return 0
+
+
+flights_command = Command(
+    help="RoboBee flights 1 and 2 with the SNN and the LQR, Figs. 8-11 of the RoboBee SNN paper",
+    add_arguments=_add_arguments,
+    run=run_flights,
+)
+learning_command = Command(
+    help="RoboBee success over the learning rate mu and the reward time constant tau, robots randomised",
+    add_arguments=_add_arguments,
+    run=run_learning,
+)
+populations_command = Command(
+    help="RoboBee success over the input and hidden population sizes, robots randomised",
+    add_arguments=_add_arguments,
+    run=run_populations,
+)

@@ -16,7 +16,7 @@ Writes, in ``--out DIR``:
 - ``snake.gif``: a short animation of the same run, top-down view beside the
   camera's events;
 - ``snake_tracking.csv`` and ``snake_tracking.png``: the scripted steering
-  controller (:mod:`robots.snake.steering`) on each track of Fig. 5 (8,
+  controller (`robots.snake.steering`) on each track of Fig. 5 (8,
   ladder, zigzag and their mirror images): mean absolute head-to-target angle
   (while the target is held), and the time at which the target is first lost
   (the paper's reset rule; empty when it never is).
@@ -27,23 +27,28 @@ Everything runs with the ``mujoco`` physics backend. ``SPIKEJAX_SNAKE_SCALE``
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
+from spikejax.commands import Command, add_common
 from robots.common import write_csv
 from robots.snake import steering
-from robots.snake import tracks as T
-from robots.snake.env import SnakeEnv, rollout
+from robots.snake import tracks
 from robots.snake.gait import default_gait, gait_period, joint_targets
-from robots.snake.physics import forward_kinematics, make_physics
 from spikejax.errors import UserError
+
+if TYPE_CHECKING:
+    from robots.snake.env import SnakeEnv
+
+# robots.snake.env and robots.snake.physics (MuJoCo and MJX) are imported by the functions that
+# run the snake: `spikejax reproduce` imports this module to list its flags beside the others'.
 
 STEERS = (-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2)  # C_o, rad
 GAIT_PERIODS = 8  # gait periods per steering rollout
@@ -74,6 +79,8 @@ def gait_rollouts(periods: int = GAIT_PERIODS, steers=STEERS):
 
     Returns ``(cases, times, com (n, T, 3), head yaw (n, T), xpos (n, T, 18, 3))``.
     """
+    from robots.snake.physics import forward_kinematics, make_physics
+
     phys = make_physics("mujoco")
     gait = default_gait()
     n = int(round(periods * float(gait_period(gait)) / (phys.dt * phys.substeps)))
@@ -136,6 +143,8 @@ def _event_image(frame, events):
 
 def camera_run(steps: int = STRIP_STEPS):
     """One snake following the target on the 8 with the scripted controller, camera on: frames and events."""
+    from robots.snake.env import SnakeEnv
+
     env = SnakeEnv("eight")
     params = steering.SteeringParams()
     key = jax.random.PRNGKey(0)
@@ -170,6 +179,8 @@ def _animate(path: Path, env: SnakeEnv, record, frames: int = 40) -> None:
     from matplotlib.animation import PillowWriter
     from matplotlib.patches import Circle
 
+    from robots.snake.physics import forward_kinematics
+
     images, events, qpos, target, _ = record
     bodies = [env.physics.mj_model.body(f"module{k}").id for k in range(17)]
     xpos = np.asarray(jax.jit(jax.vmap(lambda q: forward_kinematics(q)[0]))(jnp.asarray(qpos)))[:, bodies]
@@ -183,7 +194,7 @@ def _animate(path: Path, env: SnakeEnv, record, frames: int = 40) -> None:
             eye.cla()
             top.plot(xpos[k, :, 0], xpos[k, :, 1], "o-", color="tab:orange", ms=3)
             top.plot(xpos[k, 0, 0], xpos[k, 0, 1], "ks", ms=5)
-            top.add_patch(Circle(target[k], T.TARGET_RADIUS, color="tab:green"))
+            top.add_patch(Circle(target[k], tracks.TARGET_RADIUS, color="tab:green"))
             centre = 0.5 * (xpos[k].mean(axis=0)[:2] + target[k])
             top.set_xlim(centre[0] - 2.0, centre[0] + 2.0)
             top.set_ylim(centre[1] - 2.0, centre[1] + 2.0)
@@ -198,6 +209,8 @@ def _animate(path: Path, env: SnakeEnv, record, frames: int = 40) -> None:
 def track_runs(seconds: float = TRACK_SECONDS, progress: bool = True):
     """The scripted controller on every track, mirrored and not; per track a dict of per-step series."""
     from tqdm import tqdm
+
+    from robots.snake.env import SnakeEnv, rollout
 
     params = steering.SteeringParams()
     results = {}
@@ -279,9 +292,21 @@ def run(out: Path, scale: float = 1.0, progress: bool = True) -> dict[str, list[
     return {"gait": gait, "tracking": tracking}
 
 
-def main(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    rows = run(out, _scale(), progress=not getattr(args, "no_progress", False))
+def _add_arguments(parser) -> None:
+    add_common(parser)
+
+
+def run_gait(*, out: str | Path, no_progress: bool = False) -> int:
+    """``spikejax reproduce snake-gait --out DIR``: `robots.snake.reproduce.run`, and its tables printed.
+
+    Durations are scaled by ``SPIKEJAX_SNAKE_SCALE`` (see the module docstring).
+
+    Args:
+        out: output directory.
+        no_progress: hide the progress bar.
+    """
+    out = Path(out)
+    rows = run(out, _scale(), progress=not no_progress)
     print("C_o  comp  speed m/s  turn deg/s  head yaw amp deg")
     for r in rows["gait"]:
         print(f"{r[0]:+.2f}  {r[1]}     {r[2]:.3f}      {r[3]:+7.2f}     {r[4]:.2f}")
@@ -291,3 +316,10 @@ def main(args: argparse.Namespace) -> int:
     print(f"wrote {out}/snake_gait.csv, snake_tracking.csv, snake_trajectories.png, snake_events.png, "
           f"snake_tracking.png, snake.gif")
     return 0
+
+
+gait_command = Command(
+    help="the snake's gait, its head-camera events and the scripted tracking baseline (tables + figures)",
+    add_arguments=_add_arguments,
+    run=run_gait,
+)

@@ -1,31 +1,30 @@
-"""Pipe detection on event recordings: ``spikejax detect pipe FILE``.
+"""Pipe detection on event recordings: the pipeline behind ``spikejax detect pipe FILE``.
 
 The recording is cut into time slots (Alg. 2 of the snake pipe-tracking
 paper: "for each time slot"), each slot into ``sub_slots`` equal parts. The
-line and circle grids of :mod:`spikejax.vision.hough` run over the parts,
+line and circle grids of `spikejax.vision.hough` run over the parts,
 synchronously (one update per part, the paper's GPU mode) or asynchronously
 (event by event, Alg. 1 exactly), their states carried from part to part and
 slot to slot. A grid reports at most one spike per neuron per part, so a
 neuron's firing frequency in a slot (the third condition of Section 2.3) is
 the number of parts in which it fired, and a pair's the number of parts in
 which both fired; ties, frequent when every neuron over threshold fires at
-once, are broken by the slot's vote accumulator. :func:`spikejax.vision.pipe.find_body`
-and :func:`~spikejax.vision.pipe.find_entry` turn the counts into pipes, and
-Alg. 3 (:func:`spikejax.vision.pipe.track`) into distances and offsets.
+once, are broken by the slot's vote accumulator. `spikejax.vision.pipe.find_body`
+and `spikejax.vision.pipe.find_entry` turn the counts into pipes, and
+Alg. 3 (`spikejax.vision.pipe.track`) into distances and offsets.
 
 Everything per slot is one jitted ``lax.scan``; slots are processed in chunks
 of fixed size (the last one padded with empty slots), so a recording of any
 length compiles once and the result does not depend on the chunk size.
+
+The command itself (argument checks, the printed table, the CSV file and the
+overlay figure) is `spikejax.commands.detect_pipe`.
 """
 
 from __future__ import annotations
 
-import argparse
-import csv
 import dataclasses
 import math
-import sys
-from pathlib import Path
 from typing import NamedTuple
 
 import jax
@@ -38,7 +37,7 @@ from spikejax.vision import io
 from spikejax.vision import pipe as pp
 from spikejax.vision.events import Events
 
-__all__ = ["Detector", "DetectorParams", "Detections", "detect", "detector_params", "main", "run"]
+__all__ = ["Detections", "Detector", "DetectorParams", "DetectorState", "detect", "detector_params", "run", "slot_step"]
 
 MODES = ("sync", "async")
 
@@ -52,7 +51,7 @@ class Detector:
         circle: the circle grid (pipe entries), or ``None``.
         mode: ``"sync"`` or ``"async"``.
         sub_slots: parts per slot; a neuron fires at most once per part.
-        k: candidate spikes per polarity for :func:`~spikejax.vision.pipe.find_body`.
+        k: candidate spikes per polarity for `spikejax.vision.pipe.find_body`.
     """
 
     line: hough.LineGrid | None = hough.LineGrid()
@@ -88,7 +87,7 @@ def detector_params(
     body: pp.BodyParams | None = None,
     entry_min_count: float = 1.0,
 ) -> DetectorParams:
-    """:class:`DetectorParams` as float32 arrays (the circle grid defaults to the line grid's neurons)."""
+    """`DetectorParams` as float32 arrays (the circle grid defaults to the line grid's neurons)."""
     body = pp.BodyParams() if body is None else body
     return DetectorParams(
         line=hough.hough_params(v_th, decay),
@@ -99,6 +98,8 @@ def detector_params(
 
 
 class DetectorState(NamedTuple):
+    """The grids' states (``None`` for a grid the `Detector` skips)."""
+
     line: hough.HoughState | None
     circle: hough.HoughState | None
 
@@ -132,7 +133,7 @@ def slot_step(det: Detector, params: DetectorParams, state: DetectorState, event
         det: static configuration.
         params: traced parameters.
         state: the grids' states.
-        events: :class:`Events` with leaves ``(sub_slots, capacity)``.
+        events: `spikejax.vision.events.Events` with leaves ``(sub_slots, capacity)``.
         times: ``(sub_slots,)`` end of each part, s (the synchronous update times).
         t: the slot's time stamp for the detections, s.
 
@@ -164,12 +165,12 @@ def slot_step(det: Detector, params: DetectorParams, state: DetectorState, event
 
 
 def run(det: Detector, params: DetectorParams, events: Events, times, state: DetectorState | None = None, *, keep_counts: bool = False):
-    """:func:`slot_step` over slots, as a ``lax.scan`` (one stream; ``vmap`` adds streams).
+    """`slot_step` over slots, as a ``lax.scan`` (one stream; ``vmap`` adds streams).
 
     Args:
         det: static configuration.
         params: traced parameters.
-        events: :class:`Events` with leaves ``(n_slots, sub_slots, capacity)``.
+        events: `spikejax.vision.events.Events` with leaves ``(n_slots, sub_slots, capacity)``.
         times: ``(n_slots, sub_slots)`` end of each part, s; a slot's detections
             are stamped with the end of its last part.
         state: the grids' states (default: at rest at time 0).
@@ -177,7 +178,7 @@ def run(det: Detector, params: DetectorParams, events: Events, times, state: Det
             ``n_slots`` grids of each kind).
 
     Returns:
-        ``(state, bodies, entries)`` with :class:`~spikejax.vision.pipe.Pipe`
+        ``(state, bodies, entries)`` with `spikejax.vision.pipe.Pipe`
         fields of shape ``(n_slots,)``, plus ``(line_counts, circle_counts)``
         when ``keep_counts``.
     """
@@ -197,11 +198,11 @@ _run_jit = jax.jit(run, static_argnums=0)
 
 
 class Detections(NamedTuple):
-    """What :func:`detect` found in a recording (host arrays, one row per slot).
+    """What `detect` found in a recording (host arrays, one row per slot).
 
     Attributes:
-        bodies, entries: :class:`~spikejax.vision.pipe.Pipe` of numpy arrays ``(n_slots,)``.
-        body_estimates, entry_estimates: Alg. 3 for each kind, :class:`~spikejax.vision.pipe.Estimate`.
+        bodies, entries: `spikejax.vision.pipe.Pipe` of numpy arrays ``(n_slots,)``.
+        body_estimates, entry_estimates: Alg. 3 for each kind, `spikejax.vision.pipe.Estimate`.
         overflow: ``(n_slots,)`` events that did not fit the parts' capacity.
         t0: absolute time (us) of ``t = 0``.
     """
@@ -257,14 +258,14 @@ def detect(
     """Detect pipes in a recording: Alg. 2 slot by slot, then Alg. 3.
 
     Args:
-        events: canonical structured array (:func:`spikejax.vision.io.read`).
+        events: canonical structured array (`spikejax.vision.io.read`).
         sensor_size: ``(width, height)``; the grids are the paper's for this size.
-        mode: ``"sync"`` or ``"async"`` (see :mod:`spikejax.vision.hough`).
+        mode: ``"sync"`` or ``"async"`` (see `spikejax.vision.hough`).
         slot: slot length, s.
         sub_slots: parts per slot.
         capacity: events per part; the rest are counted in ``overflow``.
         lines, circles: which grids to run.
-        params: neuron and detection parameters (default :func:`detector_params`
+        params: neuron and detection parameters (default `detector_params`
             with ``v_th`` half the sensor height: an edge fires a neuron once
             it has covered about half the image within a part).
         track: Alg. 3 parameters (default: 60 degree field of view, unknown size, no speed).
@@ -272,7 +273,7 @@ def detect(
         progress: show a progress bar.
 
     Returns:
-        :class:`Detections`.
+        `Detections`.
     """
     width, height = sensor_size
     det = Detector(
@@ -320,133 +321,3 @@ def _progress(total: int, enabled: bool):
     from tqdm import tqdm
 
     return tqdm(total=total, unit="slot", desc="detect pipe", disable=not enabled)
-
-
-# --- command line ----------------------------------------------------------------
-
-
-def main(args: argparse.Namespace) -> int:
-    """``spikejax detect pipe FILE``: print the detections; write a CSV and an overlay image to ``--out``."""
-    for name in ("slot", "fov"):
-        if not getattr(args, name) > 0:
-            raise UserError(f"--{name} must be > 0, not {getattr(args, name)}")
-    if args.pipe_size < 0 or args.speed < 0:
-        raise UserError("--pipe-size and --speed must be >= 0")
-    if args.sub_slots < 1 or args.capacity < 1:
-        raise UserError("--sub-slots and --capacity must be >= 1")
-    events, size = io.read(args.file, args.sensor_size)
-    if len(events) == 0:
-        raise UserError(f"{args.file}: no events")
-    if args.mode == "async" and args.shapes != "lines":
-        # Measured on a 2-core CPU: about 200 events/s (each event updates a ring of cells at each of 64 radii).
-        print(f"note: asynchronous circle detection is slow on a CPU (about 200 events/s; {len(events)} events "
-              f"here); --mode sync, or --shapes lines for bodies only, is much faster", file=sys.stderr)
-    track = pp.track_params(fov=math.radians(args.fov), width=size[0], size=args.pipe_size, speed=args.speed)
-    found = detect(
-        events, size, mode=args.mode, slot=args.slot, sub_slots=args.sub_slots, capacity=args.capacity,
-        lines=args.shapes != "circles", circles=args.shapes != "lines",
-        params=detector_params(v_th=0.5 * size[1] if args.v_th is None else args.v_th, decay=args.decay),
-        track=track, progress=not args.no_progress,
-    )
-    rows = found.table()
-    duration = (events["t"][-1] - events["t"][0]) * 1e-6
-    print(f"{args.file}: {len(events)} event{'' if len(events) == 1 else 's'}, {size[0]}x{size[1]} sensor, {duration:.3f} s, "
-          f"{len(found.overflow)} slots of {args.slot * 1e3:g} ms, mode {args.mode}")
-    if found.overflow.sum():
-        print(f"warning: {int(found.overflow.sum())} events did not fit (capacity {args.capacity} per "
-              f"part) in {int((found.overflow > 0).sum())} slots; raise --capacity")
-    print(format_table(rows))
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        write_csv(out / "detections.csv", rows)
-        overlay(out / "overlay.png", events, size, found, args.slot)
-        print(f"wrote {out / 'detections.csv'} and {out / 'overlay.png'}")
-    return 0
-
-
-COLUMNS = ("t", "kind", "theta_deg", "width_px", "pos_px", "row_px", "distance_m", "offset_m", "control", "score")
-
-
-def format_table(rows: list[dict]) -> str:
-    """The detections as an aligned text table (distance ``-`` where unknown)."""
-    if not rows:
-        return "no pipe detected"
-    head = f"{'t (s)':>9} {'kind':<5} {'theta':>6} {'width':>6} {'pos':>6} {'distance':>9} {'C':>2} {'spikes':>6}"
-    lines = [head]
-    for r in rows:
-        d = f"{r['distance_m']:.3f} m" if r["distance_m"] > 0 else "-"
-        lines.append(
-            f"{r['t']:9.3f} {r['kind']:<5} {r['theta_deg']:6.1f} {r['width_px']:6.1f} {r['pos_px']:6.1f} "
-            f"{d:>9} {r['control']:>2d} {r['score']:6.0f}"
-        )
-    return "\n".join(lines)
-
-
-def write_csv(path: Path, rows: list[dict]) -> None:
-    """All detections, one row each (columns :data:`COLUMNS`), written atomically."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
-    tmp.replace(path)
-
-
-def edges(pipe_theta: float, width: float, pos: float, row: float) -> list[tuple[float, float, float]]:
-    """The two edges of a body as ``(theta, rho, ox=pos, oy=row)`` lines: ``rho = +-w/2`` about its centre."""
-    return [(pipe_theta, -0.5 * width, pos, row), (pipe_theta, 0.5 * width, pos, row)]
-
-
-def draw_line(ax, theta, rho, origin, size, **kw):
-    """Draw ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)`` across an image of ``size``."""
-    width, height = size
-    s, c = math.sin(theta), math.cos(theta)
-    if abs(s) >= abs(c):
-        y = np.array([0.0, height - 1.0])
-        x = origin[0] + (rho - (y - origin[1]) * c) / s
-    else:
-        x = np.array([0.0, width - 1.0])
-        y = origin[1] + (rho - (x - origin[0]) * s) / c
-    ax.plot(x, y, **kw)
-
-
-def event_frame(events: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Sum of polarities per pixel, ``(height, width)``."""
-    frame = np.zeros((size[1], size[0]), np.float32)
-    np.add.at(frame, (events["y"], events["x"]), events["p"])
-    return frame
-
-
-def overlay(path: Path, events: np.ndarray, size, found: Detections, slot: float, panels: int = 4) -> None:
-    """Up to ``panels`` slots with detections: their events, the body's edges and the entry's ring."""
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Circle
-
-    found_any = np.flatnonzero(found.bodies.valid | found.entries.valid)
-    if len(found_any) == 0:
-        found_any = np.array([int(np.argmax(np.bincount(((events["t"] - found.t0) * 1e-6 // slot).astype(int))))])
-    chosen = found_any[np.linspace(0, len(found_any) - 1, min(panels, len(found_any))).round().astype(int)]
-    fig = Figure(figsize=(3.2 * len(chosen), 3.4))
-    axes = fig.subplots(1, len(chosen), squeeze=False)
-    seconds = (events["t"] - found.t0) * 1e-6
-    for ax, i in zip(axes[0], chosen):
-        in_slot = events[(seconds >= i * slot) & (seconds < (i + 1) * slot)]
-        frame = event_frame(in_slot, size)
-        lim = max(1.0, np.abs(frame).max())
-        ax.imshow(frame, cmap="bwr", vmin=-lim, vmax=lim, interpolation="nearest")
-        if found.bodies.valid[i]:
-            b = jax.tree.map(lambda v: v[i], found.bodies)
-            for theta, rho, ox, oy in edges(float(b.theta), float(b.width), float(b.pos), float(b.row)):
-                draw_line(ax, theta, rho, (ox, oy), size, color="lime", lw=1.2)
-        if found.entries.valid[i]:
-            e = jax.tree.map(lambda v: v[i], found.entries)
-            ax.add_patch(Circle((float(e.pos), float(e.row)), 0.5 * float(e.width), fill=False, color="gold", lw=1.2))
-        ax.set_xlim(-0.5, size[0] - 0.5)
-        ax.set_ylim(size[1] - 0.5, -0.5)
-        ax.set_title(f"t = {(i + 1) * slot:.3f} s", fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    fig.suptitle("events (red ON, blue OFF); body edges green, entry gold", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
