@@ -43,8 +43,12 @@ def _top_parser(commands: dict[str, dict[str, EntryPoint]]) -> argparse.Argument
     return parser
 
 
-def _command_parser(group: str, points: dict[str, EntryPoint]) -> argparse.ArgumentParser:
-    """The parser of ``spikejax GROUP``: the command itself, or a sub-parser per command of the group."""
+def _command_parser(group: str, points: dict[str, EntryPoint], asked: str | None) -> argparse.ArgumentParser:
+    """The parser of ``spikejax GROUP``: the command itself, or a sub-parser per command of the group.
+
+    Only the command ``asked`` for is imported; all of the group's are when none of them is
+    named (for the group's ``--help``, or to refuse a name that is not there).
+    """
     if list(points) == [""]:
         command = load(points[""])
         parser = command.parser(f"spikejax {group}")
@@ -53,6 +57,9 @@ def _command_parser(group: str, points: dict[str, EntryPoint]) -> argparse.Argum
     parser = OneLineParser(prog=f"spikejax {group}")
     sub = parser.add_subparsers(dest="_name", required=True, metavar="TARGET")
     for name, point in sorted(points.items()):
+        if asked in points and name != asked:
+            sub.add_parser(name)
+            continue
         command = load(point)
         one = sub.add_parser(name, help=command.help, description=command.description or command.help)
         command.add_arguments(one)
@@ -71,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     head = top.parse_args(argv[:1])
     name = head.command
     try:
-        args = vars(_command_parser(name, commands[name]).parse_args(argv[1:]))
+        asked = argv[1] if len(argv) > 1 else None
+        args = vars(_command_parser(name, commands[name], asked).parse_args(argv[1:]))
         command: Command = args.pop("_command")
         name = " ".join([name, args.pop("_name", "")]).strip()
         return int(command.run(**args) or 0)
