@@ -1,8 +1,9 @@
 """The fast kernels behind `spikejax.vision.hough`: batching rules, cache-sized chunks, a flat-batch event loop.
 
-They compute what `spikejax.vision.hough.neuron` computes, spike for spike and
-bit for bit (tested), arranged for XLA's CPU backend; the public functions of
-`spikejax.vision.hough` call them. Why each arrangement was chosen, and what it
+They compute what `spikejax.vision.hough.neuron` computes (Alg. 1 of the snake
+pipe-tracking paper, whose algorithm and equation numbers the comments cite),
+spike for spike and bit for bit (tested), arranged for XLA's CPU backend; the
+public functions of `spikejax.vision.hough` call them. What each arrangement
 was measured against: docs/BENCHMARKS.md, "Spiking Hough detectors".
 
 * Line votes: scatter-adds of each event's ``n_theta`` cells, read from the
