@@ -40,7 +40,7 @@ def _slot_truth(values, fps, slot, n_slots):
 
 @pytest.fixture(scope="module")
 def standing():
-    scene = scenes.standing_pipe(jax.random.key(0), n_frames=31, pipe_width=24.0, start=30.0, speed=1.5, noise=0.03)
+    scene = scenes.standing_pipe(key=jax.random.key(0), n_frames=31, pipe_width=24.0, start=30.0, speed=1.5, noise=0.03)
     return scene, _recording(scene.frames, scene.times)
 
 

@@ -34,7 +34,8 @@ def test_frame_difference_by_hand():
 def test_contrast_step_makes_the_predicted_events(low, high, c):
     params = dvs.dvs_params(pos_threshold=c, neg_threshold=c, eps=1e-3)
     frames = _frames(low, high)
-    events, overflow = dvs.emulate(params, jax.random.key(0), frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8)
+    events, overflow = dvs.emulate(params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
+                                   key=jax.random.key(0))
     contrast = np.log(high + 1e-3) - np.log(low + 1e-3)
     n = int(np.floor(abs(contrast) / c))
     assert int(events.count()[0]) == 20 * n and int(overflow[0]) == 0
@@ -49,7 +50,8 @@ def test_contrast_step_makes_the_predicted_events(low, high, c):
 def test_no_change_no_events():
     params = dvs.dvs_params(threshold_sigma=0.1)
     frames = _frames(0.4, 0.4)
-    events, overflow = dvs.emulate(params, jax.random.key(1), frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8)
+    events, overflow = dvs.emulate(params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
+                                   key=jax.random.key(1))
     assert int(events.count()[0]) == 0 and int(overflow[0]) == 0
     fd, _ = dvs.difference_events(frames, jnp.asarray([0.0, 0.1]), threshold=0.01, capacity=64)
     assert int(fd.count()[0]) == 0
@@ -58,19 +60,21 @@ def test_no_change_no_events():
 def test_refractory_keeps_one_event_per_period():
     params = dvs.dvs_params(pos_threshold=0.2, neg_threshold=0.2, refractory=0.02)
     frames = _frames(0.2, 0.8)  # 6 crossings spread over 0.1 s: 0.0144 s apart
-    events, _ = dvs.emulate(params, jax.random.key(0), frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8)
+    events, _ = dvs.emulate(params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
+                            key=jax.random.key(0))
     # Crossings at 1..6 x 0.01443 s: kept 1, 3, 5 (each >= 0.02 s after the last kept).
     assert int(events.count()[0]) == 20 * 3
     long, _ = dvs.emulate(
-        params._replace(refractory=jnp.float32(1.0)), jax.random.key(0), frames, jnp.asarray([0.0, 0.1]), capacity=512,
-        max_per_pixel=8,
+        params._replace(refractory=jnp.float32(1.0)), frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
+        key=jax.random.key(0),
     )
     assert int(long.count()[0]) == 20
 
 
 def test_too_many_crossings_are_counted():
     params = dvs.dvs_params(pos_threshold=0.2, neg_threshold=0.2)
-    events, overflow = dvs.emulate(params, jax.random.key(0), _frames(0.2, 0.8), jnp.asarray([0.0, 0.1]), capacity=50, max_per_pixel=4)
+    events, overflow = dvs.emulate(params, _frames(0.2, 0.8), jnp.asarray([0.0, 0.1]), capacity=50, max_per_pixel=4,
+                                   key=jax.random.key(0))
     # 6 crossings per pixel, 4 made (2 counted), 80 made of which 50 fit.
     assert int(events.count()[0]) == 50 and int(overflow[0]) == 20 * 2 + 30
 
@@ -79,7 +83,7 @@ def test_mismatch_and_noise_come_from_the_key():
     params = dvs.dvs_params(threshold_sigma=0.2, noise_rate=5.0)
     frames = jnp.stack([jnp.full((32, 32), v) for v in (0.3, 0.5, 0.5)])
     times = jnp.asarray([0.0, 0.1, 0.2])
-    run = jax.jit(lambda k: dvs.emulate(params, k, frames, times, capacity=4096))
+    run = jax.jit(lambda k: dvs.emulate(params, frames, times, capacity=4096, key=k))
     a, _ = run(jax.random.key(7))
     b, _ = run(jax.random.key(7))
     c, _ = run(jax.random.key(8))
@@ -101,20 +105,21 @@ def test_emulator_vmaps_over_cameras():
     frames = jnp.stack([_frames(0.2, 0.5), _frames(0.6, 0.1)])
     keys = jax.random.split(jax.random.key(0), 2)
     times = jnp.asarray([0.0, 0.05])
-    batch, _ = jax.vmap(lambda k, f: dvs.emulate(params, k, f, times, capacity=512, max_per_pixel=8))(keys, frames)
+    batch, _ = jax.vmap(lambda k, f: dvs.emulate(params, f, times, capacity=512, max_per_pixel=8, key=k))(keys, frames)
     for i in range(2):
-        alone, _ = dvs.emulate(params, keys[i], frames[i], times, capacity=512, max_per_pixel=8)
+        alone, _ = dvs.emulate(params, frames[i], times, capacity=512, max_per_pixel=8, key=keys[i])
         np.testing.assert_array_equal(np.asarray(batch.t[i]), np.asarray(alone.t))
 
 
 def test_scenes_give_their_truth_and_check_input():
     ball = scenes.moving_ball(n_frames=3, start=(30.0, 40.0), velocity=(5.0, 0.0), radius=8.0)
+    assert isinstance(ball, scenes.SyntheticScene)
     frame = np.asarray(ball.frames[2])
     assert frame[40, 40] > 0.8 and frame[40, 30] < 0.3  # moved from (30, 40) to (40, 40)
     assert ball.truth.a.tolist() == [30.0, 35.0, 40.0]
     pipe = scenes.lying_pipe(n_frames=2, centre=(50.0, 60.0), radius=10.0, growth=2.0)
     assert float(pipe.frames[1][60, 50]) < 0.2 and pipe.truth.r.tolist() == [10.0, 12.0]
-    noisy = scenes.standing_pipe(jax.random.key(0), n_frames=2, noise=0.05)
+    noisy = scenes.standing_pipe(key=jax.random.key(0), n_frames=2, noise=0.05)
     assert 0.0 <= float(noisy.frames.min()) and float(noisy.frames.max()) <= 1.0
     with pytest.raises(UserError, match="key"):
         scenes.standing_pipe(n_frames=2, noise=0.05)

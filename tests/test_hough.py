@@ -1,4 +1,5 @@
-"""Spiking Hough grids: accumulators against brute force and scikit-image, Alg. 1 by hand."""
+"""Spiking Hough grids: accumulators against brute force and scikit-image, Alg. 1 by hand, the fast path
+against the readable reference (`hough.neuron`) and the NumPy oracle (`hough.reference`)."""
 
 import math
 
@@ -12,6 +13,7 @@ from skimage.transform import hough_circle, hough_circle_peaks, hough_line
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
 from spikejax.vision.events import Events
+from spikejax.vision.hough import neuron, reference
 
 
 def _events(x, y, t=None, p=None, valid=None):
@@ -161,10 +163,11 @@ def test_alg1_by_hand():
     # spike: without the decay it would be 3). Slot 2: 3.0 >= 2.5, spike +1,
     # rows 1-3 reset (row 3 held -1). Row 4: -3 at t = 0.75, spike -1, rows 3-4
     # reset. Row 0: -1 at t = 1, decays to 0 by t = 2, then +1.
-    state, spikes = hough.async_run(params, grid, ev)
-    np.testing.assert_array_equal(np.asarray(spikes)[:, 0, :], [[0, 0, 0, 0, 0], [0, 0, 1, 0, -1]])
-    np.testing.assert_allclose(np.asarray(state.v)[0], [1.0, 0, 0, 0, 0])
-    assert float(state.t[0, 0]) == 2.0
+    for run in (hough.async_run, neuron.async_run, reference.async_run_numpy):
+        state, spikes = run(params, grid, ev)
+        np.testing.assert_array_equal(np.asarray(spikes)[:, 0, :], [[0, 0, 0, 0, 0], [0, 0, 1, 0, -1]])
+        np.testing.assert_allclose(np.asarray(state.v)[0], [1.0, 0, 0, 0, 0])
+        assert float(state.t[0, 0]) == 2.0
 
 
 def test_sync_sums_a_slot_before_firing():
@@ -200,7 +203,7 @@ def test_sync_and_async_agree_when_events_are_sparse_in_time(grid):
     np.testing.assert_array_equal(np.asarray(sp_sync), np.asarray(sp_async))
     # Untouched neurons have decayed in sync mode only on paper: compare at the end.
     end = float(ev.t[-1])
-    decayed = lambda s: hough._decay(s.v, params.decay * (end - s.t))
+    decayed = lambda s: neuron.decay(s.v, params.decay * (end - s.t))
     np.testing.assert_allclose(np.asarray(decayed(s_sync)), np.asarray(decayed(s_async)), atol=1e-5)
 
 
@@ -255,3 +258,96 @@ def test_lying_pipe_circle_is_the_peak():
     k, b, a = np.unravel_index(np.argmax(acc), acc.shape)
     truth = scene.truth
     assert abs(a - truth.a[1]) <= 1 and abs(b - truth.b[1]) <= 1 and abs(grid.radii()[k] - truth.r[1]) <= 1
+
+
+# --- the fast path against the readable reference and the NumPy oracle ---------
+
+SMALL = 32  # a 32 x 32 sensor keeps the per-event reference loops short
+
+
+def _scene_events(kind, variant=0):
+    """Event frames ``(5, 256)`` and the frame times of a small synthetic scene."""
+    if kind == "line":
+        scene = scenes.standing_pipe(n_frames=6, height=SMALL, width=SMALL, pipe_width=8.0, start=10.0 + 2 * variant,
+                                     speed=2.0, tilt=0.2 - 0.1 * variant)
+    else:
+        scene = scenes.lying_pipe(n_frames=6, height=SMALL, width=SMALL, centre=(14.0 + variant, 16.0), radius=6.0,
+                                  speed=1.0, growth=1.0)
+    events, overflow = dvs.difference_events(scene.frames, scene.times, threshold=0.1, capacity=256)
+    assert int(overflow.sum()) == 0 and int(events.count().min()) > 50
+    return events, scene.times[1:]
+
+
+def _small_grid(kind):
+    if kind == "line":
+        return hough.LineGrid(width=SMALL, height=SMALL, n_theta=45, n_rho=48)
+    return hough.CircleGrid(width=SMALL, height=SMALL, n_r=10, r_min=2.0)
+
+
+def _assert_trees_equal(a, b):
+    assert jax.tree.structure(a) == jax.tree.structure(b)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def _runs(mode, grid, times):
+    """``(fast, readable)``: ``run(params, events)`` of `hough` and of `hough.neuron`."""
+    if mode == "sync":
+        return (lambda p, e: hough.sync_run(p, grid, e, times)), (lambda p, e: neuron.sync_run(p, grid, e, times))
+    return (lambda p, e: hough.async_run(p, grid, e)), (lambda p, e: neuron.async_run(p, grid, e))
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+@pytest.mark.parametrize("kind", ["line", "circle"])
+def test_fast_path_equals_the_readable_reference(kind, mode):
+    grid = _small_grid(kind)
+    events, times = _scene_events(kind)
+    fast, readable = _runs(mode, grid, times)
+    for v_th in (3.0, 5.0):
+        params = hough.hough_params(v_th=v_th, decay=37.0)
+        ours = jax.jit(fast)(params, events)
+        assert np.abs(np.asarray(ours[1])).sum() > 100
+        _assert_trees_equal(ours, jax.jit(readable)(params, events))
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+@pytest.mark.parametrize("kind", ["line", "circle"])
+def test_fast_path_equals_the_readable_reference_vmapped(kind, mode):
+    # Three streams (three scenes), each with its own threshold; also nested (2 x 3).
+    grid = _small_grid(kind)
+    streams = [_scene_events(kind, variant) for variant in range(3)]
+    events = jax.tree.map(lambda *a: jnp.stack(a), *(e for e, _ in streams))
+    fast, readable = _runs(mode, grid, streams[0][1])
+    run = lambda f: jax.jit(jax.vmap(lambda e, v: f(hough.hough_params(v_th=v, decay=37.0), e)))
+    v_th = jnp.asarray([3.0, 4.0, 5.0])
+    ours = run(fast)(events, v_th)
+    assert np.abs(np.asarray(ours[1])).reshape(3, -1).sum(axis=1).min() > 100
+    _assert_trees_equal(ours, run(readable)(events, v_th))
+    nested = lambda f: jax.jit(jax.vmap(jax.vmap(lambda e, v: f(hough.hough_params(v_th=v, decay=37.0), e))))
+    pairs = jax.tree.map(lambda a: jnp.stack([a, a[::-1]]), events)
+    _assert_trees_equal(nested(fast)(pairs, jnp.stack([v_th, v_th])), nested(readable)(pairs, jnp.stack([v_th, v_th])))
+
+
+@pytest.mark.parametrize("kind", ["line", "circle"])
+def test_async_equals_the_numpy_oracle(kind):
+    grid = _small_grid(kind)
+    events, _ = _scene_events(kind)
+    params = hough.hough_params(v_th=3.0, decay=37.0)
+    state, spikes = hough.async_run(params, grid, events)
+    oracle_state, oracle_spikes = reference.async_run_numpy(params, grid, events)
+    assert np.abs(oracle_spikes).sum() > 100
+    np.testing.assert_array_equal(np.asarray(spikes), oracle_spikes)
+    np.testing.assert_array_equal(np.asarray(state.t), oracle_state.t)  # frame times: exact in float32
+    # The oracle runs in float64: the potentials agree to float32 rounding.
+    np.testing.assert_allclose(np.asarray(state.v), oracle_state.v, rtol=0, atol=1e-5)
+
+
+def test_reference_votes_equal_the_fast_votes():
+    for kind in ("line", "circle"):
+        grid = _small_grid(kind)
+        events, _ = _scene_events(kind)
+        one = jax.tree.map(lambda a: a[2], events)
+        for signed in (True, False):
+            np.testing.assert_array_equal(
+                np.asarray(hough.votes(grid, one, signed=signed)), np.asarray(neuron.votes(grid, one, signed=signed))
+            )

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from spikejax.errors import UserError
-from spikejax.vision import render as R
+from spikejax.vision import render
 
 
 def _sphere_only(center, radius=0.3, brightness=0.05):
-    return R.Scene(R.spheres(center, radius, brightness), R.no_cylinders(), ground_brightness=0.75)  # ground as sky
+    # The ground as bright as the sky.
+    return render.Scene(render.spheres(center, radius, brightness), render.no_cylinders(), ground_brightness=0.75)
 
 
 def _yaw(angle):
@@ -30,9 +31,9 @@ def _disc(img, level=0.5):
 
 @pytest.mark.parametrize("distance", [1.6, 3.0])
 def test_sphere_ahead_projects_to_centre_with_pinhole_radius(distance):
-    camera = R.Camera(supersample=4)
+    camera = render.Camera(supersample=4)
     scene = _sphere_only([distance, 0.0, 1.0])._replace(ambient=1.0)
-    img = R.render(scene, jnp.array([0.0, 0.0, 1.0]), jnp.eye(3), camera)
+    img = render.render(scene, jnp.array([0.0, 0.0, 1.0]), jnp.eye(3), camera)
     col, row, radius = _disc(img)
     expected = camera.focal * 0.3 / math.sqrt(distance**2 - 0.3**2)
     assert abs(col - 64.0) < 0.05 and abs(row - 64.0) < 0.05
@@ -43,30 +44,30 @@ def test_sphere_ahead_projects_to_centre_with_pinhole_radius(distance):
 
 
 def test_off_axis_sphere_lands_where_the_pinhole_model_puts_it():
-    camera = R.Camera(supersample=4)
+    camera = render.Camera(supersample=4)
     yaw = math.radians(20.0)
     pos = np.array([1.0, -2.0, 0.5])
     rot = _yaw(yaw)
     # 2.5 m ahead, 0.4 m to the left and 0.3 m below the camera, in the camera frame.
     local = np.array([2.5, 0.4, -0.3])
     center = pos + rot @ local
-    img = R.render(_sphere_only(center, radius=0.1)._replace(ambient=1.0), pos, rot, camera)
+    img = render.render(_sphere_only(center, radius=0.1)._replace(ambient=1.0), pos, rot, camera)
     col, row, _ = _disc(img)
     f = camera.focal
     assert col == pytest.approx(64.0 - f * 0.4 / 2.5, abs=0.3)  # left of centre
     assert row == pytest.approx(64.0 + f * 0.3 / 2.5, abs=0.3)  # below centre
-    np.testing.assert_allclose(R.project(camera, pos, rot, center), [64.0 - f * 0.16, 64.0 + f * 0.12], rtol=1e-5)
+    np.testing.assert_allclose(render.project(camera, pos, rot, center), [64.0 - f * 0.16, 64.0 + f * 0.12], rtol=1e-5)
 
 
 def test_focal_length_from_field_of_view():
-    assert R.Camera(width=128, fov=math.radians(90.0)).focal == pytest.approx(64.0)
-    assert R.Camera().focal == pytest.approx(64.0 / math.tan(math.radians(30.0)))
+    assert render.Camera(width=128, fov=math.radians(90.0)).focal == pytest.approx(64.0)
+    assert render.Camera().focal == pytest.approx(64.0 / math.tan(math.radians(30.0)))
 
 
 def test_ground_horizon_and_brightness():
     # Level camera 0.5 m above the ground: the top half is sky, the bottom half ground.
-    scene = R.Scene(R.no_spheres(), R.no_cylinders(), ambient=1.0)
-    img = np.asarray(R.render(scene, jnp.array([0.0, 0.0, 0.5]), jnp.eye(3)))
+    scene = render.Scene(render.no_spheres(), render.no_cylinders(), ambient=1.0)
+    img = np.asarray(render.render(scene, jnp.array([0.0, 0.0, 0.5]), jnp.eye(3)))
     np.testing.assert_allclose(img[:64], 0.75)
     np.testing.assert_allclose(img[64:], 0.35)
 
@@ -90,11 +91,13 @@ def test_ray_distances_match_mujoco_mj_ray():
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     pipe_axis = data.geom_xmat[3].reshape(3, 3)[:, 2]
-    scene = R.Scene(
-        R.spheres([2.0, 0.5, 0.4], 0.3, 0.1),
-        R.concat_cylinders(R.standing_cylinder(3.0, -1.0, 0.25, 1.2),
-                           R.Cylinders(jnp.array([[4.0, 1.5, 0.4]]), jnp.asarray(pipe_axis[None], jnp.float32),
-                                       jnp.array([0.3]), jnp.array([1.0]), jnp.array([0.1]), jnp.array([0.05]))),
+    scene = render.Scene(
+        render.spheres([2.0, 0.5, 0.4], 0.3, 0.1),
+        render.concat_cylinders(
+            render.standing_cylinder(3.0, -1.0, 0.25, 1.2),
+            render.Cylinders(jnp.array([[4.0, 1.5, 0.4]]), jnp.asarray(pipe_axis[None], jnp.float32),
+                             jnp.array([0.3]), jnp.array([1.0]), jnp.array([0.1]), jnp.array([0.05])),
+        ),
     )
     origin = np.array([0.0, 0.0, 0.45])
     rng = np.random.default_rng(0)
@@ -107,7 +110,7 @@ def test_ray_distances_match_mujoco_mj_ray():
     ])
     dirs = targets - origin
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    t, _ = R.intersect(scene, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+    t, _ = render.intersect(scene, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
     expected, caps = [], []
     for d in dirs:
         geomid = np.zeros(1, np.int32)
@@ -125,10 +128,10 @@ def test_ray_distances_match_mujoco_mj_ray():
 
 def test_open_pipe_shows_its_inner_wall_end_on():
     # Looking down the axis of a lying pipe: a ring of inner wall around the dark far opening.
-    scene = R.Scene(R.no_spheres(), R.lying_cylinder([3.0, 0.0, 0.0], 0.0, 0.3, 2.0, 0.2, 0.05), ground_height=-100.0,
-                    ground_brightness=0.75, ambient=1.0)
-    img = np.asarray(R.render(scene, jnp.array([0.0, 0.0, 0.0]), jnp.eye(3)))
-    f = R.Camera().focal
+    pipe = render.lying_cylinder([3.0, 0.0, 0.0], 0.0, 0.3, 2.0, 0.2, 0.05)
+    scene = render.Scene(render.no_spheres(), pipe, ground_height=-100.0, ground_brightness=0.75, ambient=1.0)
+    img = np.asarray(render.render(scene, jnp.array([0.0, 0.0, 0.0]), jnp.eye(3)))
+    f = render.Camera().focal
     assert img[64, 64] == pytest.approx(0.75)  # sky through the far end
     near, far = f * 0.3 / 2.0, f * 0.3 / 4.0  # radii of the near and far rims
     ring_col = int(64 + 0.5 * (near + far))
@@ -139,12 +142,23 @@ def test_open_pipe_shows_its_inner_wall_end_on():
 def test_render_vmaps_over_camera_poses():
     scene = _sphere_only([2.0, 0.0, 0.0])
     poses = jnp.stack([jnp.zeros(3), jnp.array([0.0, 0.3, 0.0])])
-    batch = jax.jit(jax.vmap(lambda p: R.render(scene, p, jnp.eye(3))))(poses)
-    np.testing.assert_allclose(batch[1], R.render(scene, poses[1], jnp.eye(3)), atol=1e-6)
+    batch = jax.jit(jax.vmap(lambda p: render.render(scene, p, jnp.eye(3))))(poses)
+    np.testing.assert_allclose(batch[1], render.render(scene, poses[1], jnp.eye(3)), atol=1e-6)
     # Moving the camera left moves the sphere right in the image.
     assert _disc(batch[1])[0] > _disc(batch[0])[0] + 5
 
 
 def test_bad_camera_is_a_user_error():
     with pytest.raises(UserError, match="field of view"):
-        R.Camera(fov=4.0).validate()
+        render.Camera(fov=4.0).validate()
+
+
+def test_camera_is_static_configuration():
+    # A frozen dataclass: hashable, not a pytree, so jit takes it as a static argument.
+    camera = render.Camera(width=16, height=8)
+    assert jax.tree.leaves(camera) == [camera] and hash(camera) == hash(render.Camera(width=16, height=8))
+    scene = _sphere_only([2.0, 0.0, 1.0])
+    pos = jnp.array([0.0, 0.0, 1.0])
+    img = jax.jit(render.render, static_argnames="camera")(scene, pos, jnp.eye(3), camera=camera)
+    assert img.shape == (8, 16)
+    np.testing.assert_allclose(img, render.render(scene, pos, jnp.eye(3), camera), atol=1e-6)

@@ -1,10 +1,10 @@
 """DVS emulators: events from a sequence of intensity frames.
 
 Two models, both written for one camera (``jax.vmap`` adds cameras) and
-returning fixed-capacity :class:`~spikejax.vision.events.Events` with the count
+returning fixed-capacity `spikejax.vision.events.Events` with the count
 of events that did not fit (DESIGN rule 4):
 
-* :func:`frame_difference`: the simple model of the DVS camera plugins of the
+* `frame_difference`: the simple model of the DVS camera plugins of the
   robot simulators the snake papers used (NRP, V-REP): the simulator renders
   frames, and a pixel whose intensity changed by at least ``threshold`` since
   the previous frame emits one event, polarity the sign of the change, all
@@ -12,7 +12,7 @@ of events that did not fit (DESIGN rule 4):
   intensities in ``[0, 1]`` by default, as those plugins compare rendered grey
   levels; ``log=True`` takes it on ``log(I + eps)`` instead, which makes the
   threshold a contrast, as in a real DVS pixel. The paper does not say which.
-* :func:`init` / :func:`step` / :func:`emulate`: a contrast-threshold emulator in
+* `init` / `step` / `emulate`: a contrast-threshold emulator in
   the manner of ESIM and v2e. Each pixel keeps a reference log intensity; while
   the log intensity moves (linearly in time between two frames) away from the
   reference by a positive threshold ``C+`` (or a negative one ``C-``), the pixel
@@ -97,7 +97,7 @@ def frame_difference(
 def difference_events(
     frames: jax.Array, times: jax.Array, *, threshold: float, capacity: int, log: bool = False, eps: float = 1e-3
 ) -> tuple[Events, jax.Array]:
-    """:func:`frame_difference` of each frame with the one before it.
+    """`frame_difference` of each frame with the one before it.
 
     Args:
         frames: ``(n, height, width)`` intensities in ``[0, 1]``.
@@ -136,7 +136,7 @@ class DVSParams(NamedTuple):
 def dvs_params(
     pos_threshold=0.2, neg_threshold=0.2, threshold_sigma=0.0, refractory=0.0, noise_rate=0.0, eps=1e-3
 ) -> DVSParams:
-    """:class:`DVSParams` as float32 arrays (defaults: v2e's nominal 0.2 thresholds, no noise)."""
+    """`DVSParams` as float32 arrays (defaults: v2e's nominal 0.2 thresholds, no noise)."""
     f = lambda v: jnp.asarray(v, jnp.float32)
     return DVSParams(f(pos_threshold), f(neg_threshold), f(threshold_sigma), f(refractory), f(noise_rate), f(eps))
 
@@ -160,7 +160,7 @@ class DVSState(NamedTuple):
     t: jax.Array
 
 
-def init(params: DVSParams, key: jax.Array, frame: jax.Array, t0=0.0) -> DVSState:
+def init(params: DVSParams, frame: jax.Array, t0=0.0, *, key: jax.Array) -> DVSState:
     """Pixels that have just seen ``frame`` at ``t0``; the thresholds' mismatch is drawn from ``key``."""
     frame = jnp.asarray(frame, jnp.float32)
     log_frame = jnp.log(frame + params.eps)
@@ -181,10 +181,10 @@ def step(
     state: DVSState,
     frame: jax.Array,
     t,
-    key: jax.Array,
     *,
     capacity: int,
     max_per_pixel: int = 4,
+    key: jax.Array,
 ) -> tuple[DVSState, Events, jax.Array]:
     """The events of the interval from the last frame to ``frame`` at time ``t``.
 
@@ -256,21 +256,21 @@ def step(
 @functools.partial(jax.jit, static_argnames=("capacity", "max_per_pixel"))
 def emulate(
     params: DVSParams,
-    key: jax.Array,
     frames: jax.Array,
     times: jax.Array,
     *,
     capacity: int,
     max_per_pixel: int = 4,
+    key: jax.Array,
 ) -> tuple[Events, jax.Array]:
-    """Run :func:`step` over a sequence of frames, starting from ``frames[0]``.
+    """Run `step` over a sequence of frames, starting from ``frames[0]``.
 
     Args:
         params: emulator parameters.
-        key: PRNG key: the threshold mismatch and every interval's noise derive from it.
         frames: ``(n, height, width)`` intensities in ``[0, 1]``.
         times: ``(n,)`` increasing frame times, seconds.
-        capacity, max_per_pixel: as in :func:`step` (static).
+        capacity, max_per_pixel: as in `step` (static).
+        key: PRNG key: the threshold mismatch and every interval's noise derive from it.
 
     Returns:
         ``(events, overflow)``: events with leaves ``(n - 1, capacity)``, row ``k``
@@ -279,12 +279,12 @@ def emulate(
     frames = jnp.asarray(frames, jnp.float32)
     times = jnp.asarray(times, jnp.float32)
     k_init, k_steps = jax.random.split(key)
-    state = init(params, k_init, frames[0], times[0])
+    state = init(params, frames[0], times[0], key=k_init)
     keys = jax.random.split(k_steps, frames.shape[0] - 1)
 
     def body(state, inputs):
         frame, t, k = inputs
-        state, events, overflow = step(params, state, frame, t, k, capacity=capacity, max_per_pixel=max_per_pixel)
+        state, events, overflow = step(params, state, frame, t, capacity=capacity, max_per_pixel=max_per_pixel, key=k)
         return state, (events, overflow)
 
     _, (events, overflow) = jax.lax.scan(body, state, (frames[1:], times[1:], keys))

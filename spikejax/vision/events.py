@@ -3,12 +3,12 @@
 A DVS camera emits events ``(x, y, t, p)``: pixel column, pixel row, time
 stamp and polarity (+1 brighter, -1 darker). Their number varies from frame to
 frame, but arrays under ``jit`` and ``vmap`` must have a static shape, so an
-:class:`Events` holds ``capacity`` slots and a boolean ``valid`` mask
+`Events` holds ``capacity`` slots and a boolean ``valid`` mask
 (DESIGN rule 4). Whoever fills a fixed capacity counts what did not fit and
 returns that count beside the events: an overflow is reported, never silently
 dropped.
 
-Conventions, used by every module of :mod:`spikejax.vision`:
+Conventions, used by every module of `spikejax.vision`:
 
 * ``x`` (column) and ``y`` (row) are ``int32`` pixel indices, ``0 <= x < width``,
   ``0 <= y < height``; the image's row 0 is its top row.
@@ -24,6 +24,8 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+__all__ = ["Events", "empty", "compact"]
 
 
 class Events(NamedTuple):
@@ -53,8 +55,8 @@ def empty(capacity: int) -> Events:
 def _running_count(mask: jax.Array, block: int = 128) -> jax.Array:
     """``cumsum(mask)`` as int32, row by row when rows of ``block`` divide ``mask``.
 
-    On a CPU under ``vmap`` one long ``cumsum`` of a 128 x 128 frame takes
-    about twice as long as ``cumsum`` along rows plus the rows' offsets.
+    On a CPU under ``vmap`` one long ``cumsum`` of a 128 x 128 frame is slower
+    than ``cumsum`` along rows plus the rows' offsets (docs/BENCHMARKS.md).
     """
     n = mask.shape[0]
     if n % block or n <= block:
@@ -74,8 +76,8 @@ def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
 
     Slot ``k`` holds the entry where the running count of selected entries
     reaches ``k + 1``, found by binary search of the running count: gathers
-    of ``capacity`` entries rather than scatters of all ``n``, which under
-    ``vmap`` on a CPU is about 3 times faster for a 128 x 128 frame.
+    of ``capacity`` entries rather than scatters of all ``n``, faster under
+    ``vmap`` on a CPU (docs/BENCHMARKS.md).
     """
     mask = jnp.asarray(mask, bool).reshape(-1)
     n = mask.shape[0]

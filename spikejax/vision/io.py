@@ -1,36 +1,36 @@
 """Event streams in and out: numpy structured arrays, ``.npy``, ``.npz`` and AEDAT4.
 
-This is the edge of :mod:`spikejax.vision` (DESIGN rule 4): recordings come in
+This is the edge of `spikejax.vision` (DESIGN rule 4): recordings come in
 the layouts users have, are checked on the host, and leave as a fixed-capacity
-:class:`~spikejax.vision.events.Events` pytree with the number of events that
+`spikejax.vision.events.Events` pytree with the number of events that
 did not fit beside it.
 
 The common layout is the one Tonic uses: a numpy structured array with fields
 ``x``, ``y``, ``t``, ``p``, time stamps in integer microseconds. Polarity comes
 in three encodings, all accepted: ``bool`` (``True`` = ON), ``0``/``1`` and
-``-1``/``+1``; they are mapped to the ``{-1, +1}`` of :class:`Events`. Anything
+``-1``/``+1``; they are mapped to the ``{-1, +1}`` of `Events`. Anything
 else (a ``2``, or a stream mixing ``0`` and ``-1``) is rejected.
 
 Functions:
 
-* :func:`normalize`: check a structured array and return it in the canonical
-  layout :data:`EVENT_DTYPE` (``x``, ``y`` int16, ``t`` int64 us, ``p`` int8 +-1).
-* :func:`from_structured` / :func:`to_structured`: array <-> :class:`Events`.
-* :func:`read` / :func:`load`: a file (``.npz``, ``.npy``, ``.aedat4``) to the
-  canonical array / to :class:`Events` (a :class:`Recording`).
-* :func:`save`: :class:`Events` or a structured array to ``.npz``, ``.npy``
+* `normalize`: check a structured array and return it in the canonical
+  layout `EVENT_DTYPE` (``x``, ``y`` int16, ``t`` int64 us, ``p`` int8 +-1).
+* `from_structured` / `to_structured`: array <-> `Events`.
+* `read` / `load`: a file (``.npz``, ``.npy``, ``.aedat4``) to the
+  canonical array / to `Events` (a `Recording`).
+* `save`: `Events` or a structured array to ``.npz``, ``.npy``
   or ``.aedat4``.
-* :func:`to_slots`: cut a recording into time slots of a fixed event capacity,
+* `to_slots`: cut a recording into time slots of a fixed event capacity,
   the input of the slot-by-slot detectors.
 
 Conventions: ``sensor_size`` is ``(width, height)`` in pixels, as Tonic's
-``sensor_size[:2]``. :class:`Events` holds ``t`` in float32 seconds, so
+``sensor_size[:2]``. `Events` holds ``t`` in float32 seconds, so
 absolute time stamps (AEDAT4 stores Unix microseconds) are made relative to a
 ``t0`` (by default the first event), which every function here returns or
 accepts so that a round trip restores the original stamps exactly. Float32
 seconds resolve 1 us up to about 16 s after ``t0`` and 8 us at 100 s.
 
-Bad input raises :class:`~spikejax.errors.UserError` with a one-line message
+Bad input raises `spikejax.errors.UserError` with a one-line message
 naming the problem and the index of the first offending event.
 """
 
@@ -85,10 +85,10 @@ class Recording(NamedTuple):
 
 
 class Slots(NamedTuple):
-    """A recording cut into time slots, one :class:`Events` row per slot.
+    """A recording cut into time slots, one `Events` row per slot.
 
     Attributes:
-        events: :class:`Events` with leaves of shape ``(n_slots, capacity)``,
+        events: `Events` with leaves of shape ``(n_slots, capacity)``,
             ``t`` in seconds after ``t0``.
         overflow: ``(n_slots,)`` int, events of each slot that did not fit.
         start: ``(n_slots,)`` float, each slot's start, seconds after ``t0``.
@@ -149,7 +149,7 @@ def _integral(name: str, values: np.ndarray) -> np.ndarray:
 
 
 def normalize(events: np.ndarray, sensor_size: tuple[int, int] = DVS128) -> np.ndarray:
-    """Check a structured event array and return it in :data:`EVENT_DTYPE`.
+    """Check a structured event array and return it in `EVENT_DTYPE`.
 
     Args:
         events: numpy structured array, shape ``(n,)``, with fields ``x``,
@@ -158,7 +158,7 @@ def normalize(events: np.ndarray, sensor_size: tuple[int, int] = DVS128) -> np.n
         sensor_size: ``(width, height)``; every ``0 <= x < width``, ``0 <= y < height``.
 
     Returns:
-        A new array of dtype :data:`EVENT_DTYPE`, polarity mapped to ``-1/+1``.
+        A new array of dtype `EVENT_DTYPE`, polarity mapped to ``-1/+1``.
 
     Raises:
         UserError: a missing field, a NaN, a coordinate outside the sensor,
@@ -211,11 +211,11 @@ def from_structured(
     capacity: int | None = None,
     t0: int | None = None,
 ) -> tuple[Events, int]:
-    """A structured array (Tonic's layout) as a fixed-capacity :class:`Events`.
+    """A structured array (Tonic's layout) as a fixed-capacity `Events`.
 
     Args:
         events: structured array with fields ``x``, ``y``, ``t`` (us), ``p``;
-            checked by :func:`normalize`.
+            checked by `normalize`.
         sensor_size: ``(width, height)``.
         capacity: slots of the buffer (default: the number of events).
         t0: time stamp (us) that becomes ``t = 0`` (default: the first event's).
@@ -262,14 +262,14 @@ def _to_events(a: np.ndarray, capacity: int, t0: int) -> tuple[Events, int]:
 
 
 def to_structured(events: Events, *, t0: int = 0, polarity: str = "signed") -> np.ndarray:
-    """The valid events of an :class:`Events` as a structured array.
+    """The valid events of an `Events` as a structured array.
 
     Args:
         events: one stream (leaves of shape ``(capacity,)``), or a sequence of
             slots of one stream (leaves ``(n_slots, capacity)``, e.g. from
-            :func:`spikejax.vision.dvs.difference_events`), read row by row.
+            `spikejax.vision.dvs.difference_events`), read row by row.
         t0: absolute time (us) of ``t = 0``; added back to the stamps.
-        polarity: ``"signed"`` for ``-1/+1`` (:data:`EVENT_DTYPE`) or ``"bool"``
+        polarity: ``"signed"`` for ``-1/+1`` (`EVENT_DTYPE`) or ``"bool"``
             for Tonic's ``False/True``.
 
     Returns:
@@ -309,7 +309,7 @@ def _suffix(path: Path) -> str:
 def read(path, sensor_size: tuple[int, int] | None = None) -> tuple[np.ndarray, tuple[int, int]]:
     """Read an event file into the canonical structured array.
 
-    ``.npz``: arrays ``x``, ``y``, ``t``, ``p`` (as :func:`save` writes them,
+    ``.npz``: arrays ``x``, ``y``, ``t``, ``p`` (as `save` writes them,
     optionally ``sensor_size``), or a single structured array with those
     fields. ``.npy``: a structured array. ``.aedat4``: the first event stream
     of the file, read with the ``aedat`` package (uncompressed, LZ4 or Zstd).
@@ -320,8 +320,8 @@ def read(path, sensor_size: tuple[int, int] | None = None) -> tuple[np.ndarray, 
             Without either, the DVS128's ``(128, 128)``.
 
     Returns:
-        ``(events, sensor_size)``, events in :data:`EVENT_DTYPE`, checked by
-        :func:`normalize`.
+        ``(events, sensor_size)``, events in `EVENT_DTYPE`, checked by
+        `normalize`.
 
     Raises:
         UserError: a missing, truncated or unreadable file, or bad events.
@@ -409,7 +409,7 @@ def load(
     capacity: int | None = None,
     t0: int | None = None,
 ) -> Recording:
-    """Read an event file (see :func:`read`) into a fixed-capacity :class:`Events`.
+    """Read an event file (see `read`) into a fixed-capacity `Events`.
 
     Args:
         path: ``.npz``, ``.npy`` or ``.aedat4`` file.
@@ -418,7 +418,7 @@ def load(
         t0: time stamp (us) that becomes ``t = 0`` (default: the first event's).
 
     Returns:
-        A :class:`Recording`; its ``overflow`` counts the events past ``capacity``.
+        A `Recording`; its ``overflow`` counts the events past ``capacity``.
     """
     a, size = read(path, sensor_size)
     t0 = _t0(a, t0)
@@ -431,17 +431,17 @@ def save(path, events, sensor_size: tuple[int, int] = DVS128, *, t0: int = 0) ->
 
     Args:
         path: destination file.
-        events: an :class:`Events` (one stream, as :func:`to_structured` takes
+        events: an `Events` (one stream, as `to_structured` takes
             it; ``t0`` added back to its stamps) or a structured array with fields ``x``, ``y``, ``t``, ``p``.
         sensor_size: ``(width, height)``, stored in ``.npz`` and ``.aedat4``.
-        t0: absolute time (us) of ``t = 0`` of an :class:`Events`.
+        t0: absolute time (us) of ``t = 0`` of an `Events`.
 
     Returns:
         The path written.
 
     Notes:
         ``.npz`` holds arrays ``x``, ``y``, ``t`` (int64 us), ``p`` (int8 +-1)
-        and ``sensor_size``; ``.npy`` one :data:`EVENT_DTYPE` array (no sensor
+        and ``sensor_size``; ``.npy`` one `EVENT_DTYPE` array (no sensor
         size). ``.aedat4`` is written uncompressed, one events stream of
         packets of at most 4096 events, with no file data table (the format's
         ``file_data_position = -1``, as a streaming writer leaves it).
@@ -553,14 +553,14 @@ def to_slots(
     Alg. 2 of the snake pipe-tracking paper.
 
     Args:
-        events: array in :data:`EVENT_DTYPE` (from :func:`read` or :func:`normalize`).
+        events: array in `EVENT_DTYPE` (from `read` or `normalize`).
         slot: slot length, seconds (> 0).
         capacity: event slots per time slot.
         t0: start of the first slot, us (default: the first event's stamp).
         n_slots: number of slots (default: enough to hold the last event).
 
     Returns:
-        :class:`Slots`, events batched with a leading slot axis.
+        `Slots`, events batched with a leading slot axis.
     """
     if not slot > 0:
         raise UserError(f"slot length must be > 0 s, not {slot}")

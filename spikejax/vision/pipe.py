@@ -8,14 +8,14 @@ implemented through spiking neural network on a snake robot", Sections 2.3-2.4:
   sweeps across it). In each time slot, among the line grid's output spikes,
   the pair of neurons with opposite spike polarity, parallel within a
   tolerance, that fired together most often is the pipe ``P(t, theta, w, pos)``
-  (:func:`find_body`). A lying pipe seen end-on is a ring: the circle grid's
-  most active neuron is the pipe entry (:func:`find_entry`).
+  (`find_body`). A lying pipe seen end-on is a ring: the circle grid's
+  most active neuron is the pipe entry (`find_entry`).
 * **Alg. 3** (relative position): the distance from a known pipe size, Eq. (8),
   or from the expansion of the pipe over 10 detections, Eq. (9); the pipe's
   lateral offset in the camera from its image position and the field of view;
   the camera's own lateral offset from the head joint angle and velocity,
   Eqs. (4)-(6); and the bang-bang control ``C = sign(offset)``
-  (:func:`track_step`, :func:`track`).
+  (`track_step`, `track`).
 
 Everything is written for one stream and jits and vmaps; the number of
 candidate spikes ``k`` and the Eq. (9) interval are static.
@@ -25,9 +25,9 @@ Conventions
 * Lines follow the paper's Eq. (2) measured from an origin ``(ox, oy)``:
   ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)``, ``x`` the column, ``y``
   the row (row 0 at the top), ``theta`` in ``[0, pi)``; the paper's origin is
-  the top-left pixel, :class:`~spikejax.vision.hough.LineGrid`'s default the
+  the top-left pixel, `spikejax.vision.hough.LineGrid`'s default the
   image centre. A vertical line ``x = ox + r`` has ``theta = pi/2``,
-  ``rho = r``. :func:`find_body` takes the grid's ``theta`` and ``rho`` values
+  ``rho = r``. `find_body` takes the grid's ``theta`` and ``rho`` values
   per index, so any such grid (any resolution, signed ``rho``) fits.
 * ``pos`` is the column (pixels from the left edge of the image) where the
   pipe's centre line crosses the image's middle row; ``w`` is the
@@ -84,7 +84,7 @@ class Pipe(NamedTuple):
         width: ``w``, pixels.
         pos: column of the pipe's centre at ``row``, pixels from the left.
         row: the middle row for a body, the ring centre's row for an entry.
-        kind: :data:`BODY` (two parallel edges) or :data:`ENTRY` (a ring).
+        kind: `BODY` (two parallel edges) or `ENTRY` (a ring).
         score: output spikes behind the detection (the pair's smaller count
             for a body, the neuron's count for an entry).
         valid: whether a pipe was found in the slot.
@@ -183,7 +183,7 @@ def find_body(
     synchronous mode fires every neuron over threshold at once), many
     neighbouring neurons tie; ``strength`` breaks the ties, in the choice of
     candidates and of the pair, without ever outranking a spike.
-    :mod:`spikejax.vision.detect` passes the slot's votes split by sign.
+    `spikejax.vision.detect` passes the slot's votes split by sign.
 
     Args:
         params: the judgment conditions.
@@ -199,7 +199,7 @@ def find_body(
         k: candidates per polarity (static).
 
     Returns:
-        A :class:`Pipe` of kind :data:`BODY`, ``score`` the number of updates
+        A `Pipe` of kind `BODY`, ``score`` the number of updates
         in which the pair fired together; ``valid`` is False when no pair
         qualifies.
     """
@@ -266,19 +266,19 @@ def find_entry(
 ) -> Pipe:
     """The pipe entry: the circle-grid neuron that fired most in the slot (Section 2.3).
 
-    Ties (see :func:`find_body`) are broken by ``strength`` when given.
+    Ties (see `find_body`) are broken by ``strength`` when given.
 
     Args:
         counts: output spikes per neuron (both polarities), shape
             ``(n_r, height, width)``: radius, centre row ``b``, centre column
-            ``a`` (the layout of :class:`~spikejax.vision.hough.CircleGrid`).
+            ``a`` (the layout of `spikejax.vision.hough.CircleGrid`).
         radii: ``(n_r,)`` radius of each plane, pixels.
         t: time stamp of the slot, s.
         min_count: fewest spikes for a detection.
         strength: optional tie-breaker of the grid's shape, >= 0.
 
     Returns:
-        A :class:`Pipe` of kind :data:`ENTRY`: ``pos = a``, ``row = b``,
+        A `Pipe` of kind `ENTRY`: ``pos = a``, ``row = b``,
         ``width = 2 r``, ``theta = 0``.
     """
     height, width = counts.shape[1], counts.shape[2]
@@ -384,7 +384,7 @@ def pipe_offset(distance, pos, center, focal):
 
 
 class TrackParams(NamedTuple):
-    """Parameters of Alg. 3 (traced; build them with :func:`track_params`).
+    """Parameters of Alg. 3 (traced; build them with `track_params`).
 
     Attributes:
         focal: ``f``, focal length, pixels.
@@ -416,7 +416,7 @@ def track_params(
     swing_phase: float = 0.0,
     omega: float = 1.0,
 ) -> TrackParams:
-    """:class:`TrackParams` from the camera's field of view (rad) and width (pixels).
+    """`TrackParams` from the camera's field of view (rad) and width (pixels).
 
     The paper's swing tuples ``(A, alpha, phi_pos)`` are ``(-0.124, 1.000,
     0.000)`` in V-REP and ``(1.400, 2.571, 0.908)`` in the NRP.
@@ -471,8 +471,8 @@ def track_step(
     gives zeros.
 
     Args:
-        params: see :class:`TrackParams`.
-        state: history from :func:`track_init` or the previous step.
+        params: see `TrackParams`.
+        state: history from `track_init` or the previous step.
         pipe: one detection (scalar fields).
         head_angle, head_velocity: ``theta`` (rad) and ``theta'`` (rad/s) of
             the head joint at ``t_i``.

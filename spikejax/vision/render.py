@@ -9,7 +9,9 @@ pose is a traced input, so a batch of robots renders a batch of frames in the
 same compiled program as their physics.
 
 The renderer knows nothing of robots: it takes a camera position and
-orientation and a :class:`Scene` of primitive arrays.
+orientation and a `Scene` of primitive arrays; its `Camera` (image size and
+field of view) is static configuration, a frozen dataclass that ``jit`` never
+traces.
 
 Conventions
 -----------
@@ -31,6 +33,7 @@ Conventions
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple
 
@@ -40,11 +43,34 @@ import numpy as np
 
 from spikejax.errors import UserError
 
+__all__ = [
+    "Camera",
+    "Spheres",
+    "Cylinders",
+    "Scene",
+    "spheres",
+    "no_spheres",
+    "no_cylinders",
+    "standing_cylinder",
+    "lying_cylinder",
+    "concat_cylinders",
+    "ray_directions",
+    "project",
+    "intersect",
+    "render",
+    "depth",
+]
+
 _FAR = 1e6  # "no hit": farther than anything in a scene
 
 
-class Camera(NamedTuple):
+@dataclasses.dataclass(frozen=True)
+class Camera:
     """Static intrinsics: image size in pixels, horizontal field of view in radians.
+
+    A frozen dataclass (hashable, not a pytree): the image size sets array
+    shapes, so a camera is configuration, closed over or passed as a static
+    argument, never traced. ``supersample`` casts ``supersample**2`` rays a pixel.
 
     The default, 128 x 128 pixels, is the DVS128 sensor both snake papers
     simulate; neither paper states the field of view, so the default is 60
@@ -144,7 +170,7 @@ def lying_cylinder(center, yaw, radius, length, brightness=0.1, inner_brightness
 
 
 def concat_cylinders(*cyls: Cylinders) -> Cylinders:
-    """Several :class:`Cylinders` as one."""
+    """Several `Cylinders` as one."""
     return Cylinders(*(jnp.concatenate(parts, axis=0) for parts in zip(*cyls)))
 
 
@@ -260,7 +286,7 @@ def intersect(scene: Scene, origin, dirs) -> tuple[jax.Array, jax.Array]:
 
 
 def _world_directions(camera: Camera, rot) -> jax.Array:
-    """The camera's ray directions (:func:`ray_directions`) rotated into the world frame, ``(h, w, 3)``."""
+    """The camera's ray directions (`ray_directions`) rotated into the world frame, ``(h, w, 3)``."""
     local = _local_directions(camera)
     rot = jnp.asarray(rot, jnp.float32)
     return jnp.stack([local[..., 0] * rot[k, 0] + local[..., 1] * rot[k, 1] + local[..., 2] * rot[k, 2]
@@ -285,6 +311,6 @@ def render(scene: Scene, cam_pos, rot, camera: Camera = Camera()) -> jax.Array:
 
 def depth(scene: Scene, cam_pos, rot, camera: Camera = Camera()) -> jax.Array:
     """Distance along each pixel's central ray to the nearest surface (1e6 for the sky), ``(height, width)``."""
-    dirs = _world_directions(camera._replace(supersample=1), rot)
+    dirs = _world_directions(dataclasses.replace(camera, supersample=1), rot)
     t, _ = intersect(scene, jnp.asarray(cam_pos, jnp.float32), dirs)
     return t

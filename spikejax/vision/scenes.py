@@ -4,23 +4,23 @@ Each scene renders a sequence of ``(height, width)`` intensity frames in
 ``[0, 1]`` (anti-aliased edges, optional Gaussian pixel noise drawn from an
 explicit key) and returns the geometry that produced them:
 
-* :func:`standing_pipe`: a bright vertical (or tilted) pipe on a dark
+* `standing_pipe`: a bright vertical (or tilted) pipe on a dark
   background while the camera sweeps sideways. Its two edges are parallel
   lines whose events have opposite polarity (the pipe body of Section 2.3 of
   the snake pipe-tracking paper).
-* :func:`lying_pipe`: the open end of a pipe seen head on, a dark disc (the
+* `lying_pipe`: the open end of a pipe seen head on, a dark disc (the
   hole) on a bright background, drifting sideways and growing as the camera
   approaches (the pipe entry: a circle).
-* :func:`moving_ball`: a bright disc moving along a straight line.
+* `moving_ball`: a bright disc moving along a straight line.
 
-Line truth uses the convention of :class:`spikejax.vision.hough.LineGrid` with
+Line truth uses the convention of `spikejax.vision.hough.LineGrid` with
 its default origin ``(width / 2, height / 2)``:
 ``rho = (x - width / 2) sin(theta) + (y - height / 2) cos(theta)``, with
 ``theta`` in ``[0, pi)``. Circle truth is ``(a, b, r)``: centre column, centre
 row, radius, in pixels.
 
-Feed the frames to :func:`spikejax.vision.dvs.difference_events` or
-:func:`spikejax.vision.dvs.emulate` for events; the events between frames
+Feed the frames to `spikejax.vision.dvs.difference_events` or
+`spikejax.vision.dvs.emulate` for events; the events between frames
 ``k - 1`` and ``k`` belong to the truth of frame ``k``.
 """
 
@@ -34,7 +34,7 @@ import numpy as np
 
 from spikejax.errors import UserError
 
-__all__ = ["PipeTruth", "CircleTruth", "Scene", "standing_pipe", "lying_pipe", "moving_ball"]
+__all__ = ["PipeTruth", "CircleTruth", "SyntheticScene", "standing_pipe", "lying_pipe", "moving_ball"]
 
 
 class PipeTruth(NamedTuple):
@@ -66,13 +66,13 @@ class CircleTruth(NamedTuple):
     r: np.ndarray
 
 
-class Scene(NamedTuple):
-    """Frames, their times and the ground truth.
+class SyntheticScene(NamedTuple):
+    """Frames, their times and the ground truth (not a `spikejax.vision.render.Scene`, which holds primitives).
 
     Attributes:
         frames: ``(n, height, width)`` float32 intensities in ``[0, 1]``.
         times: ``(n,)`` float32 frame times, seconds.
-        truth: :class:`PipeTruth` or :class:`CircleTruth`.
+        truth: `PipeTruth` or `CircleTruth`.
     """
 
     frames: jax.Array
@@ -105,7 +105,6 @@ def _finish(frames, key, noise):
 
 
 def standing_pipe(
-    key: jax.Array | None = None,
     *,
     n_frames: int = 8,
     height: int = 128,
@@ -118,7 +117,8 @@ def standing_pipe(
     foreground: float = 0.8,
     noise: float = 0.0,
     fps: float = 100.0,
-) -> Scene:
+    key: jax.Array | None = None,
+) -> SyntheticScene:
     """A bright pipe on a dark background moving sideways across the image.
 
     The camera sweeps left, so the pipe moves right by ``speed`` pixels a frame:
@@ -127,7 +127,6 @@ def standing_pipe(
     clockwise in the image.
 
     Args:
-        key: PRNG key for the pixel noise (needed when ``noise > 0``).
         n_frames, height, width: sequence length and sensor size.
         pipe_width: distance between the edges, pixels.
         start: centre column of the pipe at the middle row in frame 0.
@@ -136,6 +135,7 @@ def standing_pipe(
         background, foreground: intensities of the scene and of the pipe.
         noise: standard deviation of Gaussian pixel noise.
         fps: frames per second (sets ``times``).
+        key: PRNG key for the pixel noise (needed when ``noise > 0``).
     """
     _check(n_frames, height, width, noise, fps)
     x, y = _grid(height, width)
@@ -164,7 +164,7 @@ def standing_pipe(
         width=np.full(n_frames, pipe_width),
         pos=centres,
     )
-    return Scene(frames, jnp.arange(n_frames, dtype=jnp.float32) / fps, truth)
+    return SyntheticScene(frames, jnp.arange(n_frames, dtype=jnp.float32) / fps, truth)
 
 
 def _disc_frames(x, y, a, b, r, inside_value, outside_value):
@@ -174,7 +174,6 @@ def _disc_frames(x, y, a, b, r, inside_value, outside_value):
 
 
 def lying_pipe(
-    key: jax.Array | None = None,
     *,
     n_frames: int = 8,
     height: int = 128,
@@ -187,16 +186,18 @@ def lying_pipe(
     hole: float = 0.15,
     noise: float = 0.0,
     fps: float = 100.0,
-) -> Scene:
+    key: jax.Array | None = None,
+) -> SyntheticScene:
     """The dark opening of a pipe seen head on, drifting sideways and growing.
 
     Args:
-        key: PRNG key for the pixel noise (needed when ``noise > 0``).
         centre: ``(a, b)`` in frame 0, pixels.
         radius: radius in frame 0, pixels.
         speed: sideways motion, pixels per frame.
         growth: radius increase per frame, pixels (the camera approaches).
         background, hole: intensities of the wall and of the opening.
+        key: PRNG key for the pixel noise (needed when ``noise > 0``); the other
+            arguments as in `standing_pipe`.
     """
     _check(n_frames, height, width, noise, fps)
     x, y = _grid(height, width)
@@ -206,11 +207,10 @@ def lying_pipe(
     r = radius + growth * k
     frames = jnp.stack([_disc_frames(x, y, a[i], b[i], r[i], hole, background) for i in range(n_frames)])
     frames = _finish(frames, key, noise)
-    return Scene(frames, jnp.arange(n_frames, dtype=jnp.float32) / fps, CircleTruth(a, b, r))
+    return SyntheticScene(frames, jnp.arange(n_frames, dtype=jnp.float32) / fps, CircleTruth(a, b, r))
 
 
 def moving_ball(
-    key: jax.Array | None = None,
     *,
     n_frames: int = 8,
     height: int = 128,
@@ -222,8 +222,13 @@ def moving_ball(
     ball: float = 0.9,
     noise: float = 0.0,
     fps: float = 100.0,
-) -> Scene:
-    """A bright ball moving at constant velocity (pixels per frame) on a dark background."""
+    key: jax.Array | None = None,
+) -> SyntheticScene:
+    """A bright ball moving at constant velocity (pixels per frame) on a dark background.
+
+    ``key`` draws the pixel noise (needed when ``noise > 0``); the other
+    arguments as in `standing_pipe`.
+    """
     _check(n_frames, height, width, noise, fps)
     x, y = _grid(height, width)
     k = np.arange(n_frames)
@@ -232,4 +237,4 @@ def moving_ball(
     r = np.full(n_frames, float(radius))
     frames = jnp.stack([_disc_frames(x, y, a[i], b[i], radius, ball, background) for i in range(n_frames)])
     frames = _finish(frames, key, noise)
-    return Scene(frames, jnp.arange(n_frames, dtype=jnp.float32) / fps, CircleTruth(a, b, r))
+    return SyntheticScene(frames, jnp.arange(n_frames, dtype=jnp.float32) / fps, CircleTruth(a, b, r))

@@ -1,0 +1,410 @@
+"""The fast kernels behind `spikejax.vision.hough`: batching rules, cache-sized chunks, a flat-batch event loop.
+
+They compute what `spikejax.vision.hough.neuron` computes (Alg. 1 of the snake
+pipe-tracking paper, whose algorithm and equation numbers the comments cite),
+spike for spike and bit for bit (tested), arranged for XLA's CPU backend; the
+public functions of `spikejax.vision.hough` call them. What each arrangement
+was measured against: docs/BENCHMARKS.md, "Spiking Hough detectors".
+
+* Line votes: scatter-adds of each event's ``n_theta`` cells, read from the
+  static table `line_table` (gathered as uint16) into an int32 accumulator, a
+  few hundred events at a time so that the gathered cells stay in the cache;
+  under ``vmap`` on a CPU the streams are voted one after another, each into
+  its own cache-resident accumulator (a custom batching rule, the one place
+  that asks for the backend).
+* Circle votes: the event image convolved with the ring kernels by FFT.
+* Lateral inhibition (sync): the box dilation as ORs of shifted slices.
+* The asynchronous loop steps over event positions with every stream of the
+  batch at once: one gather of the ``(v, t_last)`` of the cells the events
+  touch and one scatter-add of the change, with inhibition (the fired cells
+  taken a few at a time from their mask packed as bits) only on steps where
+  some stream fired.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spikejax import bits
+from spikejax.errors import UserError
+from spikejax.vision.events import Events
+from spikejax.vision.hough.grids import CircleGrid, Grid, LineGrid, check_grid, line_table, ring_offsets
+from spikejax.vision.hough.neuron import HoughParams, HoughState, decay, init
+
+
+def _one_stream_at_a_time(fn):
+    """``fn`` (written for one stream), batched under ``vmap`` by ``lax.map`` on a CPU.
+
+    A scatter into a per-stream accumulator stays in the cache, and XLA's CPU
+    backend runs it as one tight loop; a batched (or flattened) scatter touches
+    every stream's accumulator and is slower there. Other backends ``vmap``.
+    Arguments are positional arrays (``jax.custom_batching``).
+    """
+    batched = jax.custom_batching.custom_vmap(fn)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        args = jax.tree.map(
+            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, tuple(in_batched)
+        )
+        if jax.default_backend() == "cpu":
+            out = jax.lax.map(lambda a: batched(*a), args)
+        else:
+            out = jax.vmap(fn)(*args)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return batched
+
+
+def _scatter_add(length: int, index, weight):
+    """``zeros(length).at[index].add(weight)``, with ``0 <= index < length``."""
+    return jnp.zeros((length,), weight.dtype).at[index].add(weight, mode="promise_in_bounds")
+
+
+@functools.cache
+def _histogram(length: int):
+    """`_scatter_add` of one stream, batched by `_one_stream_at_a_time`."""
+    return _one_stream_at_a_time(lambda index, weight: _scatter_add(length, index, weight))
+
+
+def _weights(events: Events, signed: bool) -> jax.Array:
+    w = events.p.astype(jnp.float32) if signed else jnp.ones(events.p.shape, jnp.float32)
+    return jnp.where(events.valid, w, 0.0)
+
+
+def _pixel(grid, events: Events) -> tuple[jax.Array, jax.Array]:
+    """Flat pixel index of each event and whether it lies on the sensor."""
+    on = (events.x >= 0) & (events.x < grid.width) & (events.y >= 0) & (events.y < grid.height)
+    pixel = jnp.where(on, events.y * grid.width + events.x, 0)
+    return pixel, on & events.valid
+
+
+def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Array:
+    """`spikejax.vision.hough.line_votes`, by `_line_accumulator`."""
+    return _line_accumulator(grid, signed)(events)
+
+
+@functools.cache
+def _compact_table(grid: LineGrid) -> np.ndarray:
+    """`line_table` as uint16 where the cells fit: half the bytes to gather per event."""
+    table = line_table(grid)
+    return table.astype(np.uint16) if grid.size < 2**16 else table
+
+
+@functools.cache
+def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576):
+    """`line_votes` for one stream: scatter-adds of the events' table rows.
+
+    The events go ``chunk`` at a time (a ``lax.scan``), so that the cell indices
+    and weights of a chunk (``chunk * n_theta`` of each) stay in the CPU's L2
+    cache between being gathered and being scattered. Counts are summed in
+    int32 (exact, as float32 sums of +-1 are); the table is gathered as uint16.
+    Streams run one at a time on a CPU (`_one_stream_at_a_time`).
+    """
+    table = _compact_table(grid)
+
+    def accumulate(events):
+        pixel, ok = _pixel(grid, events)
+        w = jnp.where(ok, events.p if signed else 1, 0).astype(jnp.int32)
+        n_chunks = -(-pixel.shape[0] // chunk)
+        length = -(-pixel.shape[0] // n_chunks)
+        pad = n_chunks * length - pixel.shape[0]  # padding events have weight 0
+        pixel = jnp.pad(pixel, (0, pad)).astype(jnp.uint32).reshape(n_chunks, length)
+        w = jnp.pad(w, (0, pad)).reshape(n_chunks, length)
+
+        def add(acc, part):
+            pixel, w = part
+            cells = jnp.asarray(table).at[pixel].get(mode="promise_in_bounds")
+            return acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta), mode="promise_in_bounds"), None
+
+        acc, _ = jax.lax.scan(add, jnp.zeros((grid.size + 1,), jnp.int32), (pixel, w))
+        return acc[: grid.size].reshape(grid.shape).astype(jnp.float32)
+
+    return _one_stream_at_a_time(accumulate)
+
+
+def event_image(grid, events: Events, *, signed: bool = True) -> jax.Array:
+    """Sum of the events' polarities (or counts) per pixel: ``(height, width)`` float32."""
+    pixel, ok = _pixel(grid, events)
+    w = jnp.where(ok, _weights(events, signed), 0.0)
+    image = jnp.zeros((grid.height * grid.width,), jnp.float32).at[pixel].add(w)
+    return image.reshape(grid.height, grid.width)
+
+
+def _fft_size(n: int, reach: int) -> int:
+    """Smallest 2^i 3^j 5^k >= n + reach: a circular convolution of that size has no wrap-around."""
+    need = n + reach
+    best = None
+    for i in range(12):
+        for j in range(8):
+            for k in range(6):
+                v = 2**i * 3**j * 5**k
+                if v >= need and (best is None or v < best):
+                    best = v
+    return best
+
+
+@functools.cache
+def _ring_kernels(grid: CircleGrid) -> tuple[np.ndarray, int, int]:
+    """Ring kernels laid out for a circular convolution: ``(n_r, ny, nx)`` float32."""
+    reach = int(math.floor(grid.r_max()))
+    ny, nx = _fft_size(grid.height, reach), _fft_size(grid.width, reach)
+    offsets = ring_offsets(grid)
+    kernels = np.zeros((grid.n_r, ny, nx), np.float32)
+    # An event at (x, y) votes for the centre (x + da, y + db): the kernel is the
+    # ring itself, placed at (db mod ny, da mod nx).
+    kernels[offsets[:, 0], offsets[:, 1] % ny, offsets[:, 2] % nx] = 1.0
+    return kernels, ny, nx
+
+
+def circle_votes(grid: CircleGrid, events: Events, *, signed: bool = True, method: str = "fft") -> jax.Array:
+    """`spikejax.vision.hough.circle_votes`: by FFT (`_ring_kernels`) or by a scatter of the ring cells."""
+    if method == "fft":
+        kernels, ny, nx = _ring_kernels(grid)
+        image = event_image(grid, events, signed=signed)
+        spectrum = jnp.fft.rfft2(image, s=(ny, nx))
+        rings = jnp.fft.rfft2(jnp.asarray(kernels))
+        out = jnp.fft.irfft2(rings * spectrum[None], s=(ny, nx))
+        return jnp.round(out[:, : grid.height, : grid.width])
+    if method == "scatter":
+        offsets = jnp.asarray(ring_offsets(grid))
+        pixel, ok = _pixel(grid, events)
+        w = jnp.where(ok, _weights(events, signed), 0.0)
+        flat, inside = _ring_cells(grid, offsets, events.x[:, None], events.y[:, None])
+        flat = jnp.where(inside, flat, grid.size)
+        acc = _histogram(grid.size + 1)(flat.reshape(-1), jnp.broadcast_to(w[:, None], flat.shape).reshape(-1))
+        return acc[: grid.size].reshape(grid.shape)
+    raise UserError(f"unknown circle vote method {method!r}; choose 'fft' or 'scatter'")
+
+
+def _ring_cells(grid: CircleGrid, offsets: jax.Array, x, y):
+    """Flat cell indices of the rings around pixels ``(x, y)`` and whether they are on the grid."""
+    a = x + offsets[:, 2]
+    b = y + offsets[:, 1]
+    inside = (a >= 0) & (a < grid.width) & (b >= 0) & (b < grid.height)
+    flat = (offsets[:, 0] * grid.height + b) * grid.width + a
+    return flat, inside
+
+
+def votes(grid: Grid, events: Events, *, signed: bool = True) -> jax.Array:
+    """`line_votes` or `circle_votes`, by the type of ``grid``."""
+    check_grid(grid)
+    if isinstance(grid, LineGrid):
+        return line_votes(grid, events, signed=signed)
+    return circle_votes(grid, events, signed=signed)
+
+
+# --- neurons -------------------------------------------------------------------
+
+
+def _neighbourhood(fired: jax.Array) -> jax.Array:
+    """`spikejax.vision.hough.neuron.neighbourhood`, as a box dilation one axis at a time.
+
+    The OR of three shifted slices of the padded mask per axis: XLA's CPU
+    ``reduce_window`` is a generic loop, slower.
+    """
+    for axis in range(fired.ndim):
+        n = fired.shape[axis]
+        padded = jnp.pad(fired, [(1, 1) if a == axis else (0, 0) for a in range(fired.ndim)])
+        shifted = [jax.lax.slice_in_dim(padded, i, i + n, axis=axis) for i in range(3)]
+        fired = shifted[0] | shifted[1] | shifted[2]
+    return fired
+
+
+def sync_step(params: HoughParams, grid: Grid, state: HoughState, events: Events, t) -> tuple[HoughState, jax.Array]:
+    """`spikejax.vision.hough.neuron.sync_step` with the fast `votes` and `_neighbourhood`."""
+    t = jnp.asarray(t, jnp.float32)
+    v = decay(state.v, params.decay * (t - state.t)) + votes(grid, events)
+    fired = jnp.abs(v) >= params.v_th
+    spikes = jnp.where(fired, jnp.sign(v), 0.0).astype(jnp.int8)
+    v = jnp.where(_neighbourhood(fired), 0.0, v)
+    return HoughState(v, jnp.full_like(state.t, t)), spikes
+
+
+def sync_run(
+    params: HoughParams, grid: Grid, events: Events, times, state: HoughState | None = None
+) -> tuple[HoughState, jax.Array]:
+    """`sync_step` over time slots (a ``lax.scan``)."""
+    times = jnp.asarray(times, jnp.float32)
+    if state is None:
+        state = init(grid, times[0])
+
+    def body(state, slot):
+        ev, t = slot
+        return sync_step(params, grid, state, ev, t)
+
+    return jax.lax.scan(body, state, (events, times))
+
+
+def _line_wiring(grid: LineGrid):
+    """The cells an event votes for, and the neighbourhoods of those cells, on a line grid.
+
+    Returns ``(cells, neighbours)``: ``cells(x, y, valid)`` gives, for events of
+    shape ``(B,)``, the ``(B, n_theta)`` cells (one per angle, ``grid.size`` where
+    masked) and whether each is on the grid; ``neighbours(cells, which, x, y)``
+    gives the ``(B, K, 9)`` 3 x 3 neighbourhoods (``grid.size`` outside the grid)
+    of the cells at positions ``which`` ``(B, K)`` of ``cells``.
+    """
+    table = jnp.asarray(_compact_table(grid))
+    dk, dj = (a.reshape(-1) for a in np.meshgrid(np.arange(-1, 2), np.arange(-1, 2), indexing="ij"))
+
+    def cells(x, y, valid):
+        on = valid & (x >= 0) & (x < grid.width) & (y >= 0) & (y < grid.height)
+        pixel = jnp.where(on, y * grid.width + x, 0).astype(jnp.uint32)
+        flat = table.at[pixel].get(mode="promise_in_bounds").astype(jnp.int32)
+        ok = on[:, None] & (flat < grid.size)
+        return jnp.where(ok, flat, grid.size), ok
+
+    def neighbours(flat, which, x, y):
+        rho = jnp.take_along_axis(flat, which, axis=1) - which * grid.n_rho
+        nk, nj = which[..., None] + dk, rho[..., None] + dj
+        inside = (nk >= 0) & (nk < grid.n_theta) & (nj >= 0) & (nj < grid.n_rho)
+        return jnp.where(inside, nk * grid.n_rho + nj, grid.size)
+
+    return cells, neighbours
+
+
+def _circle_wiring(grid: CircleGrid):
+    """`_line_wiring` for a circle grid: an event's ring cells, 3 x 3 x 3 neighbourhoods."""
+    offsets = jnp.asarray(ring_offsets(grid))
+    d = np.stack([a.reshape(-1) for a in np.meshgrid(*(np.arange(-1, 2),) * 3, indexing="ij")], axis=1)
+
+    def cells(x, y, valid):
+        flat, inside = _ring_cells(grid, offsets, x[:, None], y[:, None])
+        ok = valid[:, None] & inside
+        return jnp.where(ok, flat, grid.size), ok
+
+    def neighbours(flat, which, x, y):
+        o = offsets[which]  # (B, K, 3)
+        kr = o[..., 0, None] + d[:, 0]
+        b = y[:, None, None] + o[..., 1, None] + d[:, 1]
+        a = x[:, None, None] + o[..., 2, None] + d[:, 2]
+        inside = (kr >= 0) & (kr < grid.n_r) & (b >= 0) & (b < grid.height) & (a >= 0) & (a < grid.width)
+        return jnp.where(inside, (kr * grid.height + b) * grid.width + a, grid.size)
+
+    return cells, neighbours
+
+
+def _async_batch(params: HoughParams, grid: Grid, state: HoughState, events: Events, chunk: int = 12):
+    """`async_run` for a batch of ``B`` streams (leading axis of every leaf), written out.
+
+    The loop runs over event positions, not streams: step ``i`` feeds event ``i``
+    of every stream at once, so that each step is one gather and one scatter-add
+    of ``B x m`` cells (``m`` the cells an event votes for) on a flat state of
+    ``B`` grids, each with a dummy cell ``grid.size`` that masked votes go to.
+    A ``vmap`` of the one-stream loop does the same work, but XLA's CPU backend
+    copies the whole batched state on every event there.
+
+    Inhibition (Alg. 1, line 5) runs only on steps where some stream fired: the
+    fired cells of each stream are taken ``chunk`` at a time, lowest first, from
+    their mask packed as bits (`spikejax.bits`; faster than packing them to the
+    front with a cumulative sum and a scatter), and their neighbourhoods reset.
+    """
+    size, n = grid.size, grid.size + 1
+    batch = state.v.shape[0]
+    base = jnp.arange(batch, dtype=jnp.int32) * n
+    v_th = jnp.broadcast_to(params.v_th, (batch,))
+    rate = jnp.broadcast_to(params.decay, (batch,))
+    cells_of, neighbours_of = _line_wiring(grid) if isinstance(grid, LineGrid) else _circle_wiring(grid)
+    packed = jnp.stack([state.v.reshape(batch, size), state.t.reshape(batch, size)], axis=-1)
+    packed = jnp.concatenate([packed, jnp.zeros((batch, 1, 2), jnp.float32)], axis=1).reshape(batch * n, 2)
+
+    def step(carry, event):
+        packed, out = carry
+        x, y, t, p, valid = event  # each (B,)
+        cells, ok = cells_of(x, y, valid)  # (B, m)
+        flat = cells + base[:, None]
+        old = packed[flat]
+        # Alg. 1, lines 2-3, with the decay since each cell's own last update.
+        new = decay(old[..., 0], rate[:, None] * (t[:, None] - old[..., 1])) + p[:, None].astype(jnp.float32)
+        # Written as the change from the gathered values: XLA updates the state in
+        # place for a scatter-add after a gather, where a scatter-set makes it copy.
+        # Masked votes add nothing, so the dummy cell stays at (0, 0).
+        update = jnp.stack([new, jnp.broadcast_to(t[:, None], new.shape)], axis=-1) - old
+        packed = packed.at[flat].add(jnp.where(ok[..., None], update, 0.0), mode="promise_in_bounds")
+        fired = ok & (jnp.abs(new) >= v_th[:, None])
+
+        def inhibit(packed, out):
+            signs = jnp.sign(new).astype(jnp.int8)
+            m = fired.shape[1]
+
+            def body(carry):
+                words, packed, out = carry
+                which, words = jax.vmap(lambda w: bits.take_lowest(w, chunk, m))(words)
+                live = which < m
+                which = jnp.where(live, which, 0)
+                idx = jnp.where(live[..., None], neighbours_of(cells, which, x, y), size) + base[:, None, None]
+                packed = packed.at[idx.reshape(-1), 0].set(0.0, mode="promise_in_bounds")
+                spiked = jnp.where(live, jnp.take_along_axis(cells, which, axis=1), size) + base[:, None]
+                out = out.at[spiked.reshape(-1)].set(
+                    jnp.take_along_axis(signs, which, axis=1).reshape(-1), mode="promise_in_bounds"
+                )
+                return words, packed, out
+
+            words = jax.vmap(bits.pack)(fired)
+            _, packed, out = jax.lax.while_loop(lambda c: jnp.any(c[0] != 0), body, (words, packed, out))
+            return packed, out
+
+        return jax.lax.cond(jnp.any(fired), inhibit, lambda packed, out: (packed, out), packed, out), None
+
+    def slot(packed, events):
+        out = jnp.zeros((batch * n,), jnp.int8)
+        (packed, out), _ = jax.lax.scan(step, (packed, out), events)
+        return packed, out.reshape(batch, n)[:, :size].reshape((batch,) + grid.shape)
+
+    # (B, n_slots, capacity) -> (n_slots, capacity, B): one scan step per event position.
+    events = jax.tree.map(lambda a: jnp.moveaxis(a, 0, -1), tuple(events))
+    packed, spikes = jax.lax.scan(slot, packed, events)
+    packed = packed.reshape(batch, n, 2)[:, :size]
+    state = HoughState(packed[..., 0].reshape(state.v.shape), packed[..., 1].reshape(state.t.shape))
+    return state, jnp.moveaxis(spikes, 0, 1)
+
+
+def async_run(
+    params: HoughParams, grid: Grid, events: Events, state: HoughState | None = None
+) -> tuple[HoughState, jax.Array]:
+    """`spikejax.vision.hough.neuron.async_run` by `_async_batch`; batches of streams fold into one."""
+    check_grid(grid)
+    if state is None:
+        state = init(grid)
+    return _async_streams(grid)(params, state, events)
+
+
+def _broadcast_unbatched(axis_size, in_batched, args):
+    return jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, in_batched)
+
+
+@functools.cache
+def _async_streams(grid: Grid):
+    """`async_run` for one stream; under ``vmap``, `_async_batch` over the streams.
+
+    Nested ``vmap``s fold into one batch of streams.
+    """
+
+    @jax.custom_batching.custom_vmap
+    def streams(params, state, events):  # a leading stream axis on every leaf
+        return _async_batch(params, grid, state, events)
+
+    @streams.def_vmap
+    def _fold(axis_size, in_batched, params, state, events):
+        args = _broadcast_unbatched(axis_size, tuple(in_batched), (params, state, events))
+        out = streams(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        out = jax.tree.map(lambda a: a.reshape((axis_size, -1) + a.shape[1:]), out)
+        return out, jax.tree.map(lambda _: True, out)
+
+    @jax.custom_batching.custom_vmap
+    def one(params, state, events):
+        out = streams(*jax.tree.map(lambda a: jnp.asarray(a)[None], (params, state, events)))
+        return jax.tree.map(lambda a: a[0], out)
+
+    @one.def_vmap
+    def _batch(axis_size, in_batched, params, state, events):
+        out = streams(*_broadcast_unbatched(axis_size, tuple(in_batched), (params, state, events)))
+        return out, jax.tree.map(lambda _: True, out)
+
+    return one
