@@ -15,7 +15,7 @@ Three checks:
      "Eq. 7", "Equation (2)", "Alg. 1", "Algorithm 3") inside a string literal
      (docstrings included) or a comment.
    - A *paper name* is a match of one of `PAPERS` ("RoboBee paper", "hexapod
-     SCPG paper", "pipe-tracking paper", "snake R-STDP paper", a line break
+     SCPG paper", "pipe-tracking paper" or "pipe paper", "snake R-STDP paper", a line break
      allowed between the words; "paper's" counts, "papers" does not).
    - A *block* is one string literal, a run of comment lines on consecutive
      lines (lines holding nothing but the comment), or a comment after code on
@@ -56,7 +56,7 @@ SOURCES = ("spikejax", "robots")
 PAPERS = {
     "RoboBee": re.compile(r"\bRoboBee\s+paper\b"),
     "hexapod SCPG": re.compile(r"\bhexapod\s+(?:SCPG\s+)?paper\b"),
-    "pipe-tracking": re.compile(r"\bpipe-tracking\s+paper\b"),
+    "pipe-tracking": re.compile(r"\bpipe(?:-tracking)?\s+paper\b"),
     "snake R-STDP": re.compile(r"\bR-STDP\s+paper\b"),
 }
 REFERENCE = re.compile(
