@@ -11,6 +11,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax.errors import UserError
+
 __all__ = [
     "DecoderParams",
     "DecoderState",
@@ -76,7 +78,7 @@ def poisson_train(key: jax.Array, rates: jax.Array, dt, n_steps: int) -> jax.Arr
         Spikes, bool, shape ``(n_steps, n)``.
 
     Raises:
-        ValueError: if ``rates`` is 2-D and its first axis is not ``n_steps`` long.
+        UserError: if ``rates`` is 2-D and its first axis is not ``n_steps`` long.
 
     Examples:
         >>> train = poisson_train(jax.random.key(1), jnp.array([0.0, 50.0]), 1e-3, 100)
@@ -87,7 +89,7 @@ def poisson_train(key: jax.Array, rates: jax.Array, dt, n_steps: int) -> jax.Arr
     keys = jax.random.split(key, n_steps)
     if rates.ndim == 2:
         if rates.shape[0] != n_steps:
-            raise ValueError(
+            raise UserError(
                 f"rates has shape {rates.shape}: a rate per step needs shape (n_steps, n) "
                 f"with n_steps = {n_steps}"
             )

@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 
 from spikejax import bits
+from spikejax.errors import UserError
 
 __all__ = ["RowWeights", "row_weights", "add_to_rows", "dense", "connected", "propagate"]
 
@@ -121,7 +122,7 @@ def propagate(rows: RowWeights, spikes: jax.Array, max_rows: int = 24) -> jax.Ar
         The summed rows, ``(n_post,)``.
     """
     if int(max_rows) < 1:
-        raise ValueError(f"max_rows must be >= 1, got {max_rows!r}")
+        raise UserError(f"max_rows must be >= 1, got {max_rows!r}")
     n_pre = rows.w0.shape[0]
     k = min(int(max_rows), n_pre)
     words = bits.pack(spikes)

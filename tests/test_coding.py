@@ -14,6 +14,7 @@ from scipy import stats
 from spikejax.coding import poisson_spikes
 from spikejax.coding import poisson_train
 from spikejax.coding import shift_scale
+from spikejax.errors import UserError
 
 # Deviations larger than this many standard errors fail a statistical test.
 N_SE = 4.0
@@ -100,7 +101,7 @@ def test_poisson_train_with_a_rate_per_step():
 
 
 def test_poisson_train_rejects_mismatched_rate_steps():
-    with pytest.raises(ValueError, match="n_steps"):
+    with pytest.raises(UserError, match="n_steps"):
         poisson_train(jax.random.key(0), jnp.ones((10, 3)), 1e-3, 20)
 
 

@@ -13,6 +13,7 @@ from robots.robobee.controller import ControllerConfig
 from robots.robobee.controller import controller_params
 from robots.robobee.controller import controller_step
 from robots.robobee.controller import init_controller
+from spikejax.errors import UserError
 
 CONFIG = ControllerConfig()
 DT = 1e-4
@@ -87,7 +88,7 @@ def test_initial_weights_and_thresholds():
     ],
 )
 def test_bad_config_raises(config):
-    with pytest.raises(ValueError, match="ControllerConfig"):
+    with pytest.raises(UserError, match="ControllerConfig"):
         init_controller(config, controller_params(), jax.random.key(0))
 
 

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spikejax import DiscreteLIFParams, discrete_lif_step
+from spikejax.errors import UserError
 from spikejax.random import hash_seed, hash_uniform
 from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
 from robots.hexapod.cpg import RECURRENT_MASK, CPGState, CPGWeights, init_weights, rest_state, run_gait
@@ -134,7 +135,7 @@ def train(
         The trained weights, the epochs run and the per-epoch error counts.
     """
     if schedule not in ("interleaved", "blocked"):
-        raise ValueError(f"schedule must be 'interleaved' or 'blocked', got {schedule!r}")
+        raise UserError(f"schedule must be 'interleaved' or 'blocked', got {schedule!r}")
     key_init, key_train = jax.random.split(key)
     weights = init_weights(key_init, params.w_low, params.w_high)
     seed = hash_seed(key_train)

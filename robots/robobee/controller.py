@@ -41,6 +41,7 @@ from spikejax.coding import DecoderState
 from spikejax.coding import decoder_init
 from spikejax.coding import decoder_step
 from spikejax.coding import shift_scale
+from spikejax.errors import UserError
 from spikejax.neurons import LIFParams
 from spikejax.neurons import LIFState
 from spikejax.neurons import lif_init
@@ -319,9 +320,9 @@ def _validate(config: ControllerConfig) -> None:
     for name in ("n_per_input", "n_hidden", "n_output"):
         n = getattr(config, name)
         if not isinstance(n, int) or n < 1:
-            raise ValueError(f"ControllerConfig.{name} must be a positive int, got {n!r}")
+            raise UserError(f"ControllerConfig.{name} must be a positive int, got {n!r}")
     if not 0.0 < config.connectivity <= 1.0:
-        raise ValueError(
+        raise UserError(
             f"ControllerConfig.connectivity must lie in (0, 1], got {config.connectivity!r}"
         )
 
@@ -359,7 +360,7 @@ def init_controller(
         The initial state.
 
     Raises:
-        ValueError: if a size is not a positive int or ``connectivity`` is not in (0, 1].
+        UserError: if a size is not a positive int or ``connectivity`` is not in (0, 1].
     """
     _validate(config)
     n_in, n_h, n_out = config.n_input, config.n_hidden, config.n_output

@@ -31,6 +31,7 @@ from robots.robobee.dynamics import LATERAL
 from robots.robobee.lqr import AltitudeGains, altitude_control, lateral_lqr
 from robots.robobee.params import RoboBeeParams
 from robots.robobee.physics import data_at, load_model, physics_step, state_of
+from spikejax.errors import UserError
 
 # Sec. V of the RoboBee paper: initial state and the two waypoints of flight 1.
 Q0 = (-0.6, 0.0, 0.0, 0.02, 0.0, 0.0)
@@ -86,7 +87,7 @@ def flight_plan(name: str) -> FlightPlan:
     """``"waypoints"`` (flight 1: q0 -> q1 -> q2) or ``"landing"`` (flight 2)."""
     plans = {"waypoints": (Q0, (Q1, Q2)), "landing": (LANDING_Q0, (LANDING_Q1, LANDING_Q2))}
     if name not in plans:
-        raise ValueError(f"flight must be one of {sorted(plans)}, got {name!r}")
+        raise UserError(f"flight must be one of {sorted(plans)}, got {name!r}")
     q0, waypoints = plans[name]
     return FlightPlan(jnp.asarray(q0, jnp.float32), jnp.asarray(waypoints, jnp.float32))
 
@@ -130,7 +131,7 @@ def fly(
     n_waypoints = plan.waypoints.shape[0]
     n_steps = hold_steps + n_waypoints * segment_steps
     if hold_steps % record_every or segment_steps % record_every:
-        raise ValueError(f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
+        raise UserError(f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
                          f"record_every ({record_every})")
     lat = jnp.asarray(LATERAL)
     targets = jnp.concatenate([plan.q0[None], plan.waypoints])
