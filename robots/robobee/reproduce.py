@@ -34,8 +34,8 @@ from robots.common import run_named_sweep, write_csv
 from spikejax.sweep import trial_key
 from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.flight import flight_plan, fly
-from robots.robobee.lqr import altitude_gains
-from robots.robobee.params import default_params
+from robots.robobee.lqr import altitude_params
+from robots.robobee.params import robobee_params
 from robots.robobee.trial import nominal_gain
 
 FLIGHTS = {0: "flight 1 (q0 -> q1 -> q2)", 1: "flight 2 (landing)"}
@@ -67,11 +67,11 @@ HEADER = ["flight", "controller", "flights", "reached", "ci_low", "ci_high", "rm
 
 def _replay(landing: int, seed: int = 0):
     """Seed ``seed``'s flight with the SNN and the LQR steering, fully recorded."""
-    robot = default_params()
+    robot = robobee_params()
     plan = flight_plan("landing" if landing else "waypoints")
     key_net, _ = jax.random.split(trial_key(0, seed))
     run = jax.jit(lambda use: fly(ControllerConfig(), controller_params(), robot, jnp.asarray(nominal_gain()),
-                                  altitude_gains(), plan, key_net, use))
+                                  altitude_params(), plan, use, key=key_net))
     return plan, jax.device_get(run(True)), jax.device_get(run(False))
 
 
