@@ -78,7 +78,7 @@ _RULE = reward_modulated_hebbian()
 # Rows gathered per pass by `spikejax.synapses.propagate` (input->hidden, hidden->output).
 # Flight 1 has 5.0 and 2.8 spikes a step on average, up to 67 and 62 in bursts; under
 # vmap the busiest flight sets the passes, and small passes were the fastest
-# (docs/BENCHMARKS.md, "MAX_ROWS").
+# (measured: docs/BENCHMARKS.md, "RoboBee closed loop", notes).
 MAX_ROWS = (12, 8)
 
 
