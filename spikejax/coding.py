@@ -1,7 +1,8 @@
 """Encoders that turn continuous signals into spikes, and the pre-processing before them.
 
 Every function is written for one population (no batch axis: ``jax.vmap`` adds it)
-and takes an explicit ``jax.random`` key where it is stochastic.
+and takes an explicit ``jax.random`` key where it is stochastic, keyword-only and
+last (``*, key``).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ __all__ = [
 ]
 
 
-def poisson_spikes(key: jax.Array, rates: jax.Array, dt) -> jax.Array:
+def poisson_spikes(rates: jax.Array, dt, *, key: jax.Array) -> jax.Array:
     """One time step of independent Poisson spike generators.
 
     Each neuron spikes with probability ``p = 1 - exp(-rate dt)``, the exact
@@ -34,10 +35,10 @@ def poisson_spikes(key: jax.Array, rates: jax.Array, dt) -> jax.Array:
     such Poisson neurons (Section II-B, D).
 
     Args:
-        key: PRNG key, used once.
         rates: firing rates, Hz, shape ``(n,)`` (any shape works); negative rates
             are treated as 0.
         dt: step length, s (scalar, may be traced).
+        key: PRNG key, used once.
 
     Returns:
         Spikes as a bool array of the shape of ``rates``.
@@ -51,7 +52,7 @@ def poisson_spikes(key: jax.Array, rates: jax.Array, dt) -> jax.Array:
         ``rate n dt`` only by the events that fell into an already-occupied step.
 
     Examples:
-        >>> s = poisson_spikes(jax.random.key(0), jnp.full((4,), 100.0), 1e-3)
+        >>> s = poisson_spikes(jnp.full((4,), 100.0), 1e-3, key=jax.random.key(0))
         >>> s.shape, s.dtype
         ((4,), dtype('bool'))
     """
@@ -61,28 +62,28 @@ def poisson_spikes(key: jax.Array, rates: jax.Array, dt) -> jax.Array:
     return jax.random.uniform(key, rates.shape, dtype) < p
 
 
-def poisson_train(key: jax.Array, rates: jax.Array, dt, n_steps: int) -> jax.Array:
+def poisson_train(rates: jax.Array, dt, n_steps: int, *, key: jax.Array) -> jax.Array:
     """A Poisson spike train of ``n_steps`` steps, `poisson_spikes` scanned over time.
 
     Step ``k`` uses ``jax.random.split(key, n_steps)[k]``, so it equals
-    ``poisson_spikes(keys[k], rates_k, dt)`` and a simulation that draws its input
+    ``poisson_spikes(rates_k, dt, key=keys[k])`` and a simulation that draws its input
     step by step with those keys sees the same train.
 
     Args:
-        key: PRNG key, used once.
         rates: firing rates, Hz: shape ``(n,)`` for constant rates or
             ``(n_steps, n)`` for a rate per step.
         dt: step length, s.
         n_steps: number of steps (static: a ``static_argnames`` entry under ``jit``).
+        key: PRNG key, used once.
 
     Returns:
         Spikes, bool, shape ``(n_steps, n)``.
 
     Raises:
-        ValueError: if ``rates`` is 2-D and its first axis is not ``n_steps`` long.
+        UserError: if ``rates`` is 2-D and its first axis is not ``n_steps`` long.
 
     Examples:
-        >>> train = poisson_train(jax.random.key(1), jnp.array([0.0, 50.0]), 1e-3, 100)
+        >>> train = poisson_train(jnp.array([0.0, 50.0]), 1e-3, 100, key=jax.random.key(1))
         >>> train.shape, bool(train[:, 0].any())
         ((100, 2), False)
     """
@@ -90,20 +91,20 @@ def poisson_train(key: jax.Array, rates: jax.Array, dt, n_steps: int) -> jax.Arr
     keys = jax.random.split(key, n_steps)
     if rates.ndim == 2:
         if rates.shape[0] != n_steps:
-            raise ValueError(
+            raise UserError(
                 f"rates has shape {rates.shape}: a rate per step needs shape (n_steps, n) "
                 f"with n_steps = {n_steps}"
             )
 
         def step(carry, xs):
             k, r = xs
-            return carry, poisson_spikes(k, r, dt)
+            return carry, poisson_spikes(r, dt, key=k)
 
         _, spikes = jax.lax.scan(step, None, (keys, rates))
     else:
 
         def step(carry, k):
-            return carry, poisson_spikes(k, rates, dt)
+            return carry, poisson_spikes(rates, dt, key=k)
 
         _, spikes = jax.lax.scan(step, None, keys)
     return spikes

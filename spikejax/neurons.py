@@ -1,6 +1,7 @@
 """Spiking neuron models as pure per-population step functions.
 
-Every model is a step ``(params, state, inputs[, key]) -> (state, spikes)`` written
+Every model is a step ``(params, state, inputs) -> (state, spikes)``, with a
+keyword-only ``key`` last where it draws noise (``lif_step(..., *, key=None)``), written
 for one population of neurons (no batch axis: ``jax.vmap`` adds it). Parameters
 and states are NamedTuples of arrays, so a sweep can ``vmap`` over any parameter
 without recompiling.
@@ -183,6 +184,7 @@ def lif_step(
     params: LIFParams,
     state: LIFState,
     current: jax.Array,
+    *,
     key: jax.Array | None = None,
 ) -> tuple[LIFState, jax.Array]:
     """One step of the LIF of Eq. (6)-(7) of the RoboBee paper, exact over ``dt``.

@@ -3,7 +3,7 @@
 JAX's default generator (threefry2x32, 20 rounds) costs about a hundred integer
 operations per 32 random bits. A learning rule that draws a few numbers per
 neuron and step for a tiny network (the hexapod SCPG: 6 neurons) spends most of
-its time there. :func:`hash_uniform` instead hashes a counter with a per-trial
+its time there. `hash_uniform` instead hashes a counter with a per-trial
 seed through two rounds of the ``lowbias32`` integer mixer (Wellons' hash
 prospector; bias 0.17 for one round), about 15 operations per number. The seed
 comes from a regular JAX key, so randomness stays explicit, and a draw depends
@@ -33,7 +33,7 @@ def _lowbias32(x: jax.Array) -> jax.Array:
     return x ^ (x >> 16)
 
 
-def hash_seed(key: jax.Array) -> jax.Array:
+def hash_seed(*, key: jax.Array) -> jax.Array:
     """Two 32-bit words of seed from a JAX PRNG key, shape (2,), dtype uint32."""
     return jax.random.bits(key, (2,), jnp.uint32)
 
@@ -42,7 +42,7 @@ def hash_uniform(seed: jax.Array, counter: jax.Array) -> jax.Array:
     """Uniform float32 numbers in [0, 1), one per counter value.
 
     Args:
-        seed: two uint32 words from :func:`hash_seed`.
+        seed: two uint32 words from `hash_seed`.
         counter: uint32 (or int) array of distinct counter values; the output has its shape.
 
     Returns:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from spikejax.errors import UserError
+
 __all__ = ["wilson_interval"]
 
 
@@ -28,7 +30,7 @@ def wilson_interval(successes, trials, z: float = 1.959963984540054) -> tuple[np
     k = np.asarray(successes, dtype=np.float64)
     n = np.asarray(trials, dtype=np.float64)
     if np.any(n <= 0) or np.any(k < 0) or np.any(k > n):
-        raise ValueError("need 0 <= successes <= trials and trials > 0")
+        raise UserError("need 0 <= successes <= trials and trials > 0")
     p = k / n
     denom = 1.0 + z**2 / n
     centre = (p + z**2 / (2 * n)) / denom

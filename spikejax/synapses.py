@@ -16,10 +16,9 @@ instead of ``n_pre x n_post`` weights (`add_to_rows`).
 A layer's input current ``sum_i s_i w_ij`` then needs only the rows of the
 neurons that spiked, a few percent of them in a step (`propagate`); the dense
 vector-matrix product reads every weight. The spiking rows are found from
-the spikes packed 32 to a word, lowest set bit first. On a CPU, for the
-RoboBee's 200-100-50 network under ``vmap``, the rows made the closed-loop
-flights about 3x faster from 256 flights on, and the bit search (instead of
-``lax.top_k``) another 1.3x (docs/BENCHMARKS.md).
+the spikes packed 32 to a word, lowest set bit first (`spikejax.bits`), which
+is cheaper than ``lax.top_k`` on a CPU (measured: docs/BENCHMARKS.md, "RoboBee
+closed loop").
 
 Absent synapses are NaN in ``w0``, so that one gathered row carries both the
 weights and the connectivity; they read as 0.
@@ -33,6 +32,7 @@ import jax
 import jax.numpy as jnp
 
 from spikejax import bits
+from spikejax.errors import UserError
 
 __all__ = ["RowWeights", "row_weights", "add_to_rows", "dense", "connected", "propagate"]
 
@@ -121,7 +121,7 @@ def propagate(rows: RowWeights, spikes: jax.Array, max_rows: int = 24) -> jax.Ar
         The summed rows, ``(n_post,)``.
     """
     if int(max_rows) < 1:
-        raise ValueError(f"max_rows must be >= 1, got {max_rows!r}")
+        raise UserError(f"max_rows must be >= 1, got {max_rows!r}")
     n_pre = rows.w0.shape[0]
     k = min(int(max_rows), n_pre)
     words = bits.pack(spikes)

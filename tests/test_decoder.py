@@ -36,7 +36,7 @@ def decode(params, spikes, dt):
 
 def test_eq8_against_direct_sum_over_spike_times():
     alpha, beta, gamma, dt, n_steps = 0.05, 20.0, 1.5, 1e-4, 3000
-    spikes = poisson_train(jax.random.key(0), jnp.full(7, 80.0), dt, n_steps)
+    spikes = poisson_train(jnp.full(7, 80.0), dt, n_steps, key=jax.random.key(0))
     y_hat = np.asarray(decode(decoder_params(alpha, beta, gamma), spikes, dt))
 
     steps, _ = np.nonzero(np.asarray(spikes))
@@ -90,7 +90,7 @@ def test_regular_population_reaches_the_closed_form_steady_state():
 
 def test_poisson_population_mean_matches_the_steady_state():
     alpha, beta, gamma, dt, n, rate, n_steps = 0.01, 20.0, 1.0, 1e-4, 50, 80.0, 40000
-    spikes = poisson_train(jax.random.key(1), jnp.full(n, rate), dt, n_steps)
+    spikes = poisson_train(jnp.full(n, rate), dt, n_steps, key=jax.random.key(1))
     y_hat = np.asarray(decode(decoder_params(alpha, beta, gamma), spikes, dt))
     settled = y_hat[10000:]  # 20 decay times after the start
     p = -math.expm1(-rate * dt)
@@ -103,7 +103,7 @@ def test_poisson_population_mean_matches_the_steady_state():
 
 def test_vmap_over_decoder_params_equals_loop():
     dt = 1e-4
-    spikes = poisson_train(jax.random.key(2), jnp.full(10, 120.0), dt, 500)
+    spikes = poisson_train(jnp.full(10, 120.0), dt, 500, key=jax.random.key(2))
     betas = jnp.array([5.0, 20.0, 80.0])
     batched = jax.vmap(
         functools.partial(decode, spikes=spikes, dt=dt),

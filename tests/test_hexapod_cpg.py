@@ -60,7 +60,7 @@ def test_rule_moves_only_erring_neurons_from_active_synapses():
 def test_training_matches_plain_loop_reference(n_gaits, seed):
     p = TrainParams(*(jnp.float32(v) for v in (n_gaits, 2.0, 1.0, 0.0, 1.0, 1.0)))
     key = jax.random.key(seed)
-    got = train(p, key, train_cycles=2, max_epochs=60)
+    got = train(p, train_cycles=2, max_epochs=60, key=key)
     w_in, w_cpg, epochs = reference_train(p, key, train_cycles=2, max_epochs=60)
     assert int(got.epochs) == epochs
     np.testing.assert_allclose(got.weights.w_in, w_in, atol=1e-4)
@@ -71,7 +71,7 @@ def test_training_matches_plain_loop_reference(n_gaits, seed):
 def test_converged_network_produces_every_gait_for_many_cycles():
     p = TrainParams(*(jnp.float32(v) for v in (3, 2.0, 1.0, 0.0, 1.0, 1.0)))
     for seed in range(20):
-        result = train(p, jax.random.key(seed), max_epochs=200)
+        result = train(p, max_epochs=200, key=jax.random.key(seed))
         if bool(jnp.all(gait_correct(p, result.weights, eval_cycles=10))):
             break
     else:
@@ -109,9 +109,9 @@ def test_same_trial_whatever_the_batch():
 def test_stopping_early_changes_nothing():
     # A trial that converged within E epochs ends identically with a budget of E or 3E.
     p = TrainParams(*(jnp.float32(v) for v in (2, 2.0, 1.0, 0.0, 1.0, 1.0)))
-    short = train(p, jax.random.key(3), max_epochs=100)
+    short = train(p, max_epochs=100, key=jax.random.key(3))
     assert int(short.epochs) < 100
-    long = train(p, jax.random.key(3), max_epochs=300)
+    long = train(p, max_epochs=300, key=jax.random.key(3))
     assert int(long.epochs) == int(short.epochs)
     np.testing.assert_array_equal(long.weights.w_cpg, short.weights.w_cpg)
 

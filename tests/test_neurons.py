@@ -36,7 +36,7 @@ def simulate(params, state, currents, n_steps, key=None):
 
     def body(s, xs):
         i, k = xs
-        s, spikes = lif_step(params, s, i, k)
+        s, spikes = lif_step(params, s, i, key=k)
         return s, (s.v, spikes)
 
     state, (v, spikes) = jax.lax.scan(body, state, (currents, keys))
@@ -256,7 +256,7 @@ def test_lif_jit_equals_eager():
     keys = jax.random.split(jax.random.key(11), 150)
     eager_v, eager_spikes = [], []
     for k in keys:
-        s, spikes = lif_step(p, s, current, k)
+        s, spikes = lif_step(p, s, current, key=k)
         eager_v.append(s.v)
         eager_spikes.append(spikes)
     _, v, spikes = simulate(p, lif_init(5, p), current, 150, jax.random.key(11))

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from robots.robobee import bench
+from robots.robobee.controller import controller_init
 from robots.robobee.controller import controller_step
-from robots.robobee.controller import init_controller
 from robots.robobee.dynamics import clip_controls
 from robots.robobee.dynamics import rhs
-from robots.robobee.params import default_params
+from robots.robobee.params import robobee_params
 
 b2 = pytest.importorskip("brian2")
 
@@ -75,7 +75,7 @@ def test_brian2_physics_is_the_semi_implicit_euler_step_of_rhs():
     # MuJoCo's integrator; tests/test_robobee_robot.py checks the MJX model against rhs.
     setup = bench.flight_setup(1, SEED)
     flight = bench.Brian2Flight(setup.keys[0], 0, 10)
-    robot = jax.tree.map(np.float64, default_params())
+    robot = jax.tree.map(np.float64, robobee_params())
     for q, lift, torque in (((0.3, -2.0, 0.01, 0.05, 0.2, -0.1), 9e-4, 5e-7),
                             ((-0.6, 0.0, 0.0, 0.02, 0.0, 0.0), 2e-3, -3e-6),  # both commands clipped
                             ((0.0, 0.0, 0.0, 1e-6, 0.0, -0.5), 0.0, 0.0)):  # onto the floor
@@ -103,7 +103,7 @@ def test_same_spikes_with_learning_off_and_the_robot_held():
 
     @jax.jit
     def counts():
-        state = init_controller(setup.config, cp, setup.keys[0])
+        state = controller_init(setup.config, cp, key=setup.keys[0])
         # Held at q0 with target q0: zero lateral error, the teacher's output 0.
         e = jnp.zeros(4)
 
@@ -138,7 +138,7 @@ def test_brian2_and_spikejax_fly_the_same_closed_loop():
     assert np.abs(rec_b["y_hat"]).max() > 0.5
     assert np.ptp(rec_b["q"][:, 0]) > 0.05
     setup = bench.flight_setup(1, SEED)
-    state0 = init_controller(setup.config, setup.cparams, setup.keys[0])
+    state0 = controller_init(setup.config, setup.cparams, key=setup.keys[0])
     w0, mask = np.asarray(state0.w_ih), np.asarray(state0.mask_ih)
     assert np.abs(brian2["w_ih"] - w0).max() > 1e-3
     assert np.all(brian2["w_ih"][mask == 0] == 0)

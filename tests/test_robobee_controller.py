@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from robots.robobee.controller import ControllerConfig
+from robots.robobee.controller import controller_init
 from robots.robobee.controller import controller_params
 from robots.robobee.controller import controller_step
-from robots.robobee.controller import init_controller
+from spikejax.errors import UserError
 
 CONFIG = ControllerConfig()
 DT = 1e-4
@@ -39,7 +40,7 @@ def simulate(config, params, key, q, y, learn):
 
     Returns the decoded ``y_hat`` after every step and the final state.
     """
-    state = init_controller(config, params, key)
+    state = controller_init(config, params, key=key)
 
     def body(s, xs):
         return controller_step(config, params, s, *xs)
@@ -50,14 +51,14 @@ def simulate(config, params, key, q, y, learn):
 
 def test_connectivity_is_thirty_percent_and_seeded():
     p = controller_params()
-    s = init_controller(CONFIG, p, jax.random.key(0))
+    s = controller_init(CONFIG, p, key=jax.random.key(0))
     for mask in (s.mask_ih, s.mask_ho):
         n = mask.size
         se = np.sqrt(0.3 * 0.7 / n)
         assert abs(float(mask.mean()) - 0.3) < N_SE * se
     assert s.mask_ih.shape == (200, 100) and s.mask_ho.shape == (100, 50)
-    same = init_controller(CONFIG, p, jax.random.key(0))
-    other = init_controller(CONFIG, p, jax.random.key(1))
+    same = controller_init(CONFIG, p, key=jax.random.key(0))
+    other = controller_init(CONFIG, p, key=jax.random.key(1))
     np.testing.assert_array_equal(s.mask_ih, same.mask_ih)
     np.testing.assert_array_equal(s.w_ho, same.w_ho)
     assert np.asarray(s.mask_ih != other.mask_ih).any()
@@ -65,7 +66,7 @@ def test_connectivity_is_thirty_percent_and_seeded():
 
 def test_initial_weights_and_thresholds():
     p = controller_params()
-    s = init_controller(CONFIG, p, jax.random.key(2))
+    s = controller_init(CONFIG, p, key=jax.random.key(2))
     for w, mask in ((s.w_ih, s.mask_ih), (s.w_ho, s.mask_ho)):
         w, on = np.asarray(w), np.asarray(mask) == 1
         assert np.all((w[on] >= 0.0) & (w[on] < 1.0))  # U(0, 1) on existing synapses
@@ -87,8 +88,8 @@ def test_initial_weights_and_thresholds():
     ],
 )
 def test_bad_config_raises(config):
-    with pytest.raises(ValueError, match="ControllerConfig"):
-        init_controller(config, controller_params(), jax.random.key(0))
+    with pytest.raises(UserError, match="ControllerConfig"):
+        controller_init(config, controller_params(), key=jax.random.key(0))
 
 
 def test_vmap_over_seeds_equals_loop_over_seeds():
@@ -106,7 +107,7 @@ def test_vmap_over_seeds_equals_loop_over_seeds():
         np.testing.assert_allclose(batched[i], looped, rtol=1e-5, atol=1e-6)
         np.testing.assert_allclose(b_state.w_ho[i], l_state.w_ho, rtol=1e-5, atol=1e-6)
     # The rule ran: weights moved on existing synapses only.
-    assert np.abs(np.asarray(l_state.w_ho - init_controller(CONFIG, p, keys[-1]).w_ho)).max() > 0
+    assert np.abs(np.asarray(l_state.w_ho - controller_init(CONFIG, p, key=keys[-1]).w_ho)).max() > 0
 
 
 def test_learns_to_track_a_teacher_open_loop():

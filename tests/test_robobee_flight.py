@@ -6,17 +6,17 @@ import numpy as np
 
 from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.flight import flight_plan, fly
-from robots.robobee.lqr import altitude_gains, lateral_gain
-from robots.robobee.params import default_params
+from robots.robobee.lqr import altitude_params, lateral_gain
+from robots.robobee.params import robobee_params
 
 
 def test_lqr_flight_reaches_both_waypoints_and_holds_q0():
-    robot = default_params()
+    robot = robobee_params()
     K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
     plan = flight_plan("waypoints")
     rec = jax.jit(
-        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_gains(), plan, key, False,
-                        hold_steps=2000, segment_steps=10000)
+        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_params(), plan, False,
+                        hold_steps=2000, segment_steps=10000, key=key)
     )(jax.random.key(0))
     t, q = np.asarray(rec.t), np.asarray(rec.q)
     # The hold keeps the state at q0 exactly (Sec. V: the first 500 ms in the paper).
@@ -32,12 +32,12 @@ def test_lqr_flight_reaches_both_waypoints_and_holds_q0():
 
 def test_snn_flight_learning_online_reaches_both_waypoints():
     # The paper's Fig. 8: the SNN, learning from the LQR while it steers, flies q0 -> q1 -> q2.
-    robot = default_params()
+    robot = robobee_params()
     K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
     plan = flight_plan("waypoints")
     run = jax.jit(jax.vmap(
-        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_gains(), plan, key, True,
-                        hold_steps=5000, segment_steps=10000)
+        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_params(), plan, True,
+                        hold_steps=5000, segment_steps=10000, key=key)
     ))
     rec = run(jax.vmap(jax.random.key)(jnp.arange(3)))
     t, q = np.asarray(rec.t[0]), np.asarray(rec.q)

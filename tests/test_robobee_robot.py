@@ -11,7 +11,7 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from robots.robobee import dynamics, lqr, physics
-from robots.robobee.params import default_params, max_lift, randomize
+from robots.robobee.params import max_lift, randomize, robobee_params
 
 DT = 1e-4
 # Paper, Sec. V.
@@ -59,21 +59,21 @@ def _waypoints():
 
 @pytest.fixture(scope="module")
 def teacher():
-    p = default_params()
-    return lqr.lateral_gain(p), lqr.altitude_gains()
+    p = robobee_params()
+    return lqr.lateral_gain(p), lqr.altitude_params()
 
 
 @pytest.fixture(scope="module")
 def nominal_flight(teacher):
     K, gains = teacher
     K = jnp.asarray(K, jnp.float32)
-    qs = _fly(default_params(), K, gains, jnp.asarray(Q0, jnp.float32), _waypoints())
+    qs = _fly(robobee_params(), K, gains, jnp.asarray(Q0, jnp.float32), _waypoints())
     return np.asarray(qs, np.float64)
 
 
 def test_model_matches_params_and_fig3_convention():
     mj = physics.load_mj_model()
-    p = default_params()
+    p = robobee_params()
     assert (mj.nq, mj.nv, mj.nbody) == (3, 3, 2)
     assert [mj.joint(i).name for i in range(3)] == ["x", "z", "theta"]
     assert mj.opt.timestep == DT and mj.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
@@ -98,7 +98,7 @@ def test_model_matches_params_and_fig3_convention():
 
 
 def test_generalized_forces_hand_computed():
-    p = default_params()
+    p = robobee_params()
     # Upright, moving at 0.1 m/s along +x: drag -b_w * 0.1 along x' = x, acting r_w above the CoM.
     q = jnp.array([0.0, 0.0, 0.0, 0.05, 0.1, 0.0])
     qfrc = physics.generalized_forces(q, p, p.mass * p.g, 0.5e-6)
@@ -117,7 +117,7 @@ def test_generalized_forces_hand_computed():
 
 
 def test_clip_controls_are_the_papers_limits():
-    p = default_params()
+    p = robobee_params()
     weight = float(p.mass * p.g)
     f, tau = dynamics.clip_controls(p, jnp.asarray(3.0 * weight), jnp.asarray(-5e-6))
     np.testing.assert_allclose([f, tau], [1.5 * weight, -1e-6], rtol=1e-6)
@@ -127,7 +127,7 @@ def test_clip_controls_are_the_papers_limits():
 
 
 def test_rhs_numpy_equals_jax_and_hover_is_equilibrium():
-    p = default_params()
+    p = robobee_params()
     pn = _numpy_params(p)
     q = np.array([0.3, -2.0, 0.01, 0.04, 0.2, -0.1])
     a = dynamics.rhs(q, pn, 1e-3, 0.4e-6)
@@ -148,7 +148,7 @@ def test_mjx_matches_solve_ivp(lift_factor):
     integrator's truncation error and not a modelling difference (that would
     not shrink with ``dt``). float32 rounding is far below either.
     """
-    p = default_params()
+    p = robobee_params()
     pn = _numpy_params(p)
     t_end = 0.3
     q0 = np.array([0.05, 0.0, 0.0, 0.05, 0.0, 0.0])
@@ -192,7 +192,7 @@ def test_mjx_matches_solve_ivp(lift_factor):
 
 def test_uncontrolled_hover_oscillates_with_growing_amplitude():
     """Sec. II-B: hovering with f_L = m g, tau_c = 0 is unstable, a growing oscillation."""
-    p = default_params()
+    p = robobee_params()
     A, B = lqr.linearize(p)
     m, i_y, b_w, r_w, g = 80e-6, 1.4e-9, 2.0e-4, 9e-3, 9.81
     expected_a = [
@@ -231,7 +231,7 @@ def test_uncontrolled_hover_oscillates_with_growing_amplitude():
 
 def test_floor_stops_a_falling_robot():
     """Without lift the robot falls from 2 cm, lands at z = 0 and stays there."""
-    p = default_params()
+    p = robobee_params()
     q0 = jnp.array([0.0, 0.0, 0.0, 0.02, 0.0, 0.0])
     qs = np.asarray(
         _rollout(_with_timestep(DT), p, q0, jnp.zeros((N_OPEN,)), jnp.zeros((N_OPEN,)))
@@ -244,7 +244,7 @@ def test_floor_stops_a_falling_robot():
 
 
 def test_lqr_gain_is_optimal_and_stabilizes():
-    p = default_params()
+    p = robobee_params()
     K = lqr.lateral_gain(p)
     A, B = (np.asarray(a, np.float64) for a in lqr.linearize(p))
     Q, R = lqr.bryson_weights(lqr.LATERAL_SCALES, 1e-6)
@@ -259,14 +259,14 @@ def test_lqr_gain_is_optimal_and_stabilizes():
 
 
 def test_lateral_lqr_sign_and_altitude_control_hand_computed():
-    p = default_params()
+    p = robobee_params()
     K = jnp.asarray([[1.0, 2.0, 3.0, 4.0]])
     q = jnp.array([0.1, 0.2, 0.3, 0.05, 0.4, 0.0])
     target = jnp.array([0.0, 0.0, 0.5, 0.08, 0.0, 0.0])
     expected = -(1.0 * 0.1 + 2.0 * 0.2 + 3.0 * (0.3 - 0.5) + 4.0 * 0.4)
     np.testing.assert_allclose(lqr.lateral_lqr(K, q, target), expected, rtol=1e-6)
 
-    gains = lqr.altitude_gains(kp=100.0, kd=20.0, cos_min=0.5)
+    gains = lqr.altitude_params(kp=100.0, kd=20.0, cos_min=0.5)
     weight = float(p.mass * p.g)
     at_target = jnp.array([0.0, 0.0, 0.0, 0.08, 0.0, 0.0])
     lift = lqr.altitude_control(gains, at_target, at_target, p)
@@ -301,8 +301,8 @@ def test_vmap_over_randomized_robots_equals_single_runs(teacher):
     K, gains = teacher
     K = jnp.asarray(K, jnp.float32)
     keys = jax.random.split(jax.random.key(7), 8)
-    robots = jax.vmap(randomize, in_axes=(None, 0))(default_params(), keys)
-    nominal = default_params()
+    robots = jax.vmap(lambda k: randomize(robobee_params(), key=k))(keys)
+    nominal = robobee_params()
     for name in ("mass", "b_w", "inertia_y"):
         factor = np.asarray(getattr(robots, name)) / float(getattr(nominal, name))
         assert np.all((factor >= 0.8) & (factor <= 1.2)) and np.ptp(factor) > 0.05
@@ -324,7 +324,7 @@ def test_vmap_over_randomized_robots_equals_single_runs(teacher):
 
 
 def test_physics_step_compiles_within_seconds():
-    model, p = physics.load_model(), default_params()
+    model, p = physics.load_model(), robobee_params()
     data = physics.data_at(model, jnp.asarray(Q1, jnp.float32))
     start = time.perf_counter()
     step = jax.jit(physics.physics_step).lower(model, data, p, p.mass * p.g, 0.0).compile()

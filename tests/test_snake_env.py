@@ -1,5 +1,6 @@
 """The snake env: Brax's shapes and wrappers, jit and vmap, Eq. (12) at the start, the head camera and its events."""
 
+import functools
 import math
 
 import jax
@@ -9,11 +10,11 @@ import pytest
 from brax.envs.base import Env, State
 
 from robots.snake import camera as cam
-from robots.snake import tracks as T
+from robots.snake import tracks
 from robots.snake.env import SnakeEnv
 from spikejax.errors import UserError
 from spikejax.vision import dvs
-from spikejax.vision import render as R
+from spikejax.vision import render
 
 
 @pytest.fixture(scope="module")
@@ -56,11 +57,11 @@ def test_target_starts_straight_ahead(env):
     state = env.reset(jax.random.PRNGKey(0))
     head = np.asarray(state.pipeline_state.head_pos)
     target = np.asarray(state.info["target_xy"])
-    assert np.linalg.norm(target - head[:2]) == pytest.approx(T.SPAWN_DISTANCE, abs=1e-5)
+    assert np.linalg.norm(target - head[:2]) == pytest.approx(tracks.SPAWN_DISTANCE, abs=1e-5)
     np.testing.assert_allclose(state.obs[:2], 0.0, atol=1e-5)  # a_head = a_body = 0 (Eq. 12)
     # ... and the camera sees it in the middle column of its first frame.
-    col, row = R.project(cam.HEAD_CAMERA, head, state.pipeline_state.head_mat,
-                         jnp.array([*target, T.TARGET_RADIUS]))
+    col, row = render.project(cam.HEAD_CAMERA, head, state.pipeline_state.head_mat,
+                         jnp.array([*target, tracks.TARGET_RADIUS]))
     assert col == pytest.approx(64.0, abs=0.5) and row < 64.0  # centre above the camera's height
     dark = np.asarray(state.info["frame"]) < 0.2
     cols = np.nonzero(dark.any(axis=0))[0]
@@ -79,9 +80,9 @@ def test_vmap_equals_single_runs_and_actions_matter(steps):
 
 def test_moving_sphere_makes_events_on_its_edges_and_a_still_scene_none():
     pos, rot = jnp.array([0.0, 0.0, 0.3]), jnp.eye(3)
-    before = R.render(cam.scene(jnp.array([1.6, 0.0])), pos, rot, cam.HEAD_CAMERA)
-    still = R.render(cam.scene(jnp.array([1.6, 0.0])), pos, rot, cam.HEAD_CAMERA)
-    moved = R.render(cam.scene(jnp.array([1.6, -0.03])), pos, rot, cam.HEAD_CAMERA)  # 3 cm to the right
+    before = render.render(cam.scene(jnp.array([1.6, 0.0])), pos, rot, cam.HEAD_CAMERA)
+    still = render.render(cam.scene(jnp.array([1.6, 0.0])), pos, rot, cam.HEAD_CAMERA)
+    moved = render.render(cam.scene(jnp.array([1.6, -0.03])), pos, rot, cam.HEAD_CAMERA)  # 3 cm to the right
     kw = dict(threshold=0.05, capacity=4096)
     none, overflow = dvs.frame_difference(before, still, 0.02, **kw)
     assert int(none.count()) == 0 and int(overflow) == 0
@@ -127,6 +128,31 @@ def test_brax_training_wrappers_accept_the_env():
     assert float(state.info["target_s"][0]) <= 0.2 * 0.02 + 1e-6
 
 
+def test_env_params_are_traced_so_a_vmap_over_them_compiles_once():
+    traces = []
+
+    def run(env, params):
+        traces.append(env)
+        state = env.reset(jax.random.PRNGKey(0), params=params)
+        for _ in range(5):
+            state = env.step(state, jnp.array([1.0, 0.0]))
+        return state.obs
+
+    env = SnakeEnv("eight", camera=False)
+    steers = jnp.array([0.1, 0.25], jnp.float32)
+    swept = jax.vmap(lambda v: env.params._replace(max_steer=v))(steers)
+    batched = jax.jit(jax.vmap(functools.partial(run, env)))(swept)
+    one = jax.jit(functools.partial(run, env))
+    singles = [one(env.params._replace(max_steer=v)) for v in steers]
+    assert len(traces) == 2  # once for the vmap, once for both single values
+    for v, obs_b, obs_s in zip(steers, batched, singles):
+        np.testing.assert_allclose(obs_b, obs_s, atol=1e-5)
+        # The same as an env built with that value: the traced parameter takes effect.
+        built = SnakeEnv("eight", camera=False, max_steer=float(v))
+        np.testing.assert_allclose(obs_s, jax.jit(functools.partial(run, built))(built.params), atol=1e-5)
+    assert np.abs(np.asarray(batched[1, 2:] - batched[0, 2:])).max() > 0.05
+
+
 def test_bad_input_is_a_user_error():
     with pytest.raises(UserError, match="unknown track"):
         SnakeEnv("circle")
@@ -140,15 +166,15 @@ def test_steering_controller_by_hand():
     from robots.snake import steering
 
     obs = jnp.zeros(18).at[1].set(0.2)  # target 0.2 rad to the right of the body
-    state, action = steering.act(steering.SteeringParams(gain=1.0, head_gain=2.0, tau=0.0), steering.init(), obs, 0.02)
+    state, action = steering.step(steering.SteeringParams(gain=1.0, head_gain=2.0, tau=0.0), steering.init(), obs, 0.02)
     np.testing.assert_allclose(action, [0.2, 0.4], rtol=1e-6)  # unfiltered: proportional, both turn right
     params = steering.SteeringParams(gain=10.0, head_gain=0.0, tau=1.0)
-    state, action = steering.act(params, steering.init(), obs, 0.02)
+    state, action = steering.step(params, steering.init(), obs, 0.02)
     smoothed = (1 - math.exp(-0.02)) * 0.2
     assert float(state.angle) == pytest.approx(smoothed, rel=1e-5)
     np.testing.assert_allclose(action, [10 * smoothed, 0.0], rtol=1e-5)
     for _ in range(300):
-        state, action = steering.act(params, state, obs, 0.02)
+        state, action = steering.step(params, state, obs, 0.02)
     np.testing.assert_allclose(action, [1.0, 0.0])  # clipped to the action range
 
 

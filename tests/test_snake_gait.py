@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from robots.snake.gait import JOINT_LIMIT
-from robots.snake.gait import default_gait
+from robots.snake.gait import gait_params
 from robots.snake.gait import gait_period
 from robots.snake.gait import head_compensation
 from robots.snake.gait import joint_targets
@@ -17,7 +17,7 @@ from spikejax.vision.pipe import camera_offset
 
 
 def test_eq1_by_hand():
-    p = default_gait()._replace(P_head=0.5, P_tail=1.0, C_e=0.05)
+    p = gait_params()._replace(P_head=0.5, P_tail=1.0, C_e=0.05)
     t, steer = 0.7, 0.2
     alpha = np.asarray(joint_targets(p, t, steer, compensate=False))
     for i in range(1, 17):
@@ -31,7 +31,7 @@ def test_eq1_by_hand():
 
 def test_head_compensation_zeroes_the_mean_module_yaw():
     """With the compensated first joint, sum over odd j of (17 - j) alpha_j, 17 x the modules' mean yaw, is 0."""
-    p = default_gait()
+    p = gait_params()
     j = np.arange(1, 17)
     weights = np.where(j % 2 == 1, 17 - j, 0)
     for t in np.linspace(0.0, 2.5, 7):
@@ -43,7 +43,7 @@ def test_head_compensation_zeroes_the_mean_module_yaw():
 
 
 def test_head_offset_adds_to_the_first_joint_and_targets_are_clipped():
-    p = default_gait()
+    p = gait_params()
     base = joint_targets(p, 1.0, 0.0)
     shifted = joint_targets(p, 1.0, 0.0, 0.3)
     np.testing.assert_allclose(shifted - base, np.eye(16)[0] * 0.3, atol=1e-6)
@@ -63,10 +63,10 @@ def test_camera_offset_eq6_phase_identity():
 def test_camera_offset_on_the_snakes_head_joint():
     """Eq. (4)-(6) of the pipe-tracking paper fed with this gait's head joint (Eq. (1), uncompensated, and its rate).
 
-    The head joint of `default_gait` is Eq. (4) with ``a = A_o``, ``omega = omega_o``,
+    The head joint of `gait_params` is Eq. (4) with ``a = A_o``, ``omega = omega_o``,
     ``phi = Omega_o + delta_o``; the camera offset from its angle and rate is the phase-shifted swing.
     """
-    p = default_gait()
+    p = gait_params()
     A, alpha, phi_pos = 1.4, math.radians(90) / p.A_o, 0.908
     for t in (0.0, 0.4, 1.3, 2.2):
         theta, theta_dot = jax.jvp(lambda s: joint_targets(p, s, compensate=False)[0], (t,), (1.0,))
@@ -77,7 +77,7 @@ def test_camera_offset_on_the_snakes_head_joint():
 
 # ----------------------------------------------------------------- on the robot
 
-PERIOD = float(gait_period(default_gait()))
+PERIOD = float(gait_period(gait_params()))
 SECONDS = 4 * PERIOD
 CONTROL_DT = 0.02
 # (steer, compensate) of each simulated snake, all in one batch.
@@ -88,7 +88,7 @@ CASES = [(0.0, True), (0.1, True), (-0.1, True), (0.0, False)]
 def runs():
     """Four snakes for four gait periods (10 s), batched: head pose and centre of mass every control step."""
     phys = make_physics("mujoco")
-    gait = default_gait()
+    gait = gait_params()
     n = int(round(SECONDS / CONTROL_DT))
 
     def run(steer, compensate):

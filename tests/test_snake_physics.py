@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from robots.snake.gait import default_gait
+from robots.snake.gait import gait_params
 from robots.snake.gait import joint_targets
 from robots.snake.physics import forward_kinematics
 from robots.snake.physics import joint_qpos_index
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _closed_loop(phys, n_steps, steer=0.0, compensate=True):
     """``n_steps`` control steps of the gait from rest; the states after each."""
-    gait = default_gait()
+    gait = gait_params()
 
     def body(state, _):
         state = phys.step(state, joint_targets(gait, state.time, steer, 0.0, compensate))
@@ -62,7 +62,7 @@ def test_mujoco_backend_is_mujoco_c():
     """One control step through the callback equals MuJoCo's ``mj_step`` from the same (float32) state."""
     phys = make_physics("mujoco", nthread=1)
     model = phys.mj_model
-    ctrl = joint_targets(default_gait(), 0.3, 0.2)
+    ctrl = joint_targets(gait_params(), 0.3, 0.2)
     states = jax.jit(lambda: _closed_loop(phys, 15))()
     start = jax.tree.map(lambda x: x[-1], states)
     after = jax.jit(phys.step)(start, ctrl)
@@ -118,7 +118,7 @@ def test_tuned_settings_keep_speed_and_turning_within_5_percent():
 _MJX_SCRIPT = textwrap.dedent("""
     import json, sys, time
     import jax, jax.numpy as jnp
-    from robots.snake.gait import default_gait, joint_targets
+    from robots.snake.gait import gait_params, joint_targets
     from robots.snake.physics import make_physics
     n = int(sys.argv[1])
     out = {}
@@ -126,7 +126,7 @@ _MJX_SCRIPT = textwrap.dedent("""
         phys = make_physics(backend)
         def roll():
             def body(s, _):
-                s = phys.step(s, joint_targets(default_gait(), s.time, 0.1))
+                s = phys.step(s, joint_targets(gait_params(), s.time, 0.1))
                 return s, (s.head_pos, s.com_pos)
             return jax.lax.scan(body, phys.init(), None, length=n)[1]
         t0 = time.perf_counter()

@@ -26,7 +26,7 @@ def test_reproduce_snake_gait_writes_its_tables_and_figures(tmp_path, monkeypatc
 
 def test_gait_rows_by_hand():
     # A body moving along +x at 0.1 m/s while its heading turns at 2 deg/s and swings +-10 deg.
-    period = float(reproduce.gait_period(reproduce.default_gait()))
+    period = float(reproduce.gait_period(reproduce.gait_params()))
     t = np.arange(1, 4 * int(round(period / 0.02)) + 1) * 0.02
     com = np.stack([0.1 * t, 0 * t, 0 * t], axis=1)[None]
     yaw = (np.radians(2.0) * t + np.radians(10.0) * np.sin(2 * np.pi * t / period))[None]

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from spikejax.stats import wilson_interval
+from spikejax.errors import UserError
 
 
 def test_wilson_hand_computed():
@@ -25,7 +26,7 @@ def test_wilson_edges_and_coverage():
 
 
 def test_wilson_rejects_bad_counts():
-    with pytest.raises(ValueError):
+    with pytest.raises(UserError):
         wilson_interval(5, 4)
-    with pytest.raises(ValueError):
+    with pytest.raises(UserError):
         wilson_interval(0, 0)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from spikejax import synapses
+from spikejax.errors import UserError
 
 
 def _network(rng, n_pre=30, n_post=12, p=0.3):
@@ -74,5 +75,5 @@ def test_propagate_under_vmap_with_different_counts():
 
 def test_propagate_rejects_a_bad_pass_size():
     rows = synapses.row_weights(jnp.ones((3, 2)), jnp.ones((3, 2)))
-    with pytest.raises(ValueError, match="max_rows"):
+    with pytest.raises(UserError, match="max_rows"):
         synapses.propagate(rows, jnp.ones(3, bool), 0)

@@ -3,7 +3,7 @@
 Fig. 2(a) of the hexapod SCPG paper: every gait-selection neuron ``G_i`` projects
 to every CPG neuron ``N_j`` (``w_in``, shape (3, 6)), and every CPG neuron to
 every other one (``w_cpg``, shape (6, 6), no self-connections). The neurons are
-the discrete LIF of Eq. (1)-(2) (:func:`spikejax.discrete_lif_step`), updated
+the discrete LIF of Eq. (1)-(2) (`spikejax.discrete_lif_step`), updated
 synchronously: a spike at step ``t`` moves the potentials at step ``t + 1``.
 
 A gait is triggered by switching its gait-selection neuron on: as in Alg. 1
@@ -20,6 +20,8 @@ import jax.numpy as jnp
 
 from spikejax import DiscreteLIFParams, DiscreteLIFState, discrete_lif_init, discrete_lif_step
 from robots.hexapod.gaits import N_GAITS, N_LEGS
+
+__all__ = ["RECURRENT_MASK", "CPGState", "CPGWeights", "cpg_init", "cpg_step", "cpg_weights_init", "run_gait"]
 
 # w_cpg[i, j] is the synapse from N(i+1) to N(j+1); the diagonal stays zero.
 RECURRENT_MASK = 1.0 - jnp.eye(N_LEGS, dtype=jnp.float32)
@@ -44,15 +46,15 @@ class CPGState(NamedTuple):
     spikes: jax.Array
 
 
-def init_weights(key: jax.Array, low: jax.Array, high: jax.Array) -> CPGWeights:
-    """Random initial weights, ``U(low, high)`` for every synapse (Alg. 1, line 1)."""
+def cpg_weights_init(low: jax.Array, high: jax.Array, *, key: jax.Array) -> CPGWeights:
+    """Random initial weights, ``U(low, high)`` for every synapse (Alg. 1 of the hexapod SCPG paper, line 1)."""
     key_in, key_cpg = jax.random.split(key)
     w_in = jax.random.uniform(key_in, (N_GAITS, N_LEGS), minval=low, maxval=high)
     w_cpg = jax.random.uniform(key_cpg, (N_LEGS, N_LEGS), minval=low, maxval=high)
     return CPGWeights(w_in=w_in, w_cpg=w_cpg * RECURRENT_MASK)
 
 
-def rest_state() -> CPGState:
+def cpg_init() -> CPGState:
     """All potentials at 0 and no spikes: the SCPG before a gait is triggered."""
     return CPGState(neurons=discrete_lif_init(N_LEGS), spikes=jnp.zeros((N_LEGS,), jnp.float32))
 
@@ -85,5 +87,5 @@ def run_gait(
     def step(state, _):
         return cpg_step(neuron, weights, state, gait_spikes)
 
-    _, raster = jax.lax.scan(step, rest_state(), None, length=n_steps)
+    _, raster = jax.lax.scan(step, cpg_init(), None, length=n_steps)
     return raster

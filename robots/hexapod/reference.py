@@ -25,7 +25,7 @@ def reference_train(p: TrainParams, key: jax.Array, train_cycles: int = 2, max_e
     w_in = np.array(jax.random.uniform(key_in, (3, 6), minval=p.w_low, maxval=p.w_high), np.float64)
     w_cpg = np.array(jax.random.uniform(key_cpg, (6, 6), minval=p.w_low, maxval=p.w_high), np.float64)
     w_cpg *= 1 - np.eye(6)
-    seed = hash_seed(key_train)
+    seed = hash_seed(key=key_train)
     n_steps = train_cycles * gaits.PERIOD
     for epoch in range(max_epochs):
         noise = np.asarray(_epoch_noise(seed, jnp.int32(epoch), (3, n_steps, 2, 6)))

@@ -9,7 +9,7 @@ How gaits are trained (the order and interleaving of Alg. 1, made precise):
    lines 2 and 5), switches the gait's selection neuron on and runs
    ``train_cycles * PERIOD`` steps. After every step each CPG neuron's spike is
    compared with the gait's required pattern and the rule of
-   :func:`spikejax.plasticity.stochastic_supervised` changes the weights onto
+   `spikejax.plasticity.stochastic_supervised` changes the weights onto
    every neuron that erred, online (Alg. 1, lines 13-15).
 4. Training stops after the first epoch in which no presentation made a single
    error, or after ``max_epochs``. Nothing changes after such an epoch (a
@@ -31,9 +31,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from spikejax import DiscreteLIFParams
+from spikejax.errors import UserError
 from spikejax.random import hash_seed, hash_uniform
 from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
-from robots.hexapod.cpg import RECURRENT_MASK, CPGWeights, cpg_step, init_weights, rest_state, run_gait
+from robots.hexapod.cpg import RECURRENT_MASK, CPGWeights, cpg_init, cpg_step, cpg_weights_init, run_gait
 from robots.hexapod.gaits import N_GAITS, N_LEGS, PATTERNS, PERIOD
 
 _RULE = stochastic_supervised()
@@ -96,7 +97,7 @@ def _presentation(
         weights = CPGWeights(weights.w_in + dw_in, weights.w_cpg + dw_cpg * RECURRENT_MASK)
         return (weights, new_state, rule_in, rule_cpg), jnp.sum(jnp.abs(spikes - target))
 
-    carry = (weights, rest_state(), _RULE.init(weights.w_in), _RULE.init(weights.w_cpg))
+    carry = (weights, cpg_init(), _RULE.init(weights.w_in), _RULE.init(weights.w_cpg))
     (weights, _, _, _), errors = jax.lax.scan(step, carry, (targets, noise))
     return weights, jnp.sum(errors) * learn
 
@@ -110,32 +111,32 @@ def _epoch_noise(seed: jax.Array, block: jax.Array, shape: tuple[int, ...]) -> j
 
 def train(
     params: TrainParams,
-    key: jax.Array,
     *,
     train_cycles: int = 2,
     max_epochs: int = 200,
     schedule: str = "interleaved",
+    key: jax.Array,
 ) -> TrainResult:
     """Program gaits G1..G(n_gaits) into a fresh SCPG (the schedule in the module docstring).
 
     Args:
         params: traced training parameters.
-        key: PRNG key of this run.
         train_cycles: gait cycles per presentation (static).
         max_epochs: most epochs to run (static); with ``schedule="blocked"``, the
             most presentations of each gait.
         schedule: ``"interleaved"`` (G1, G2, G3, G1, ... until an epoch is
             error-free) or ``"blocked"`` (G1 until error-free, then G2, then G3,
             each once through, as Alg. 1's loops are written).
+        key: PRNG key of this run.
 
     Returns:
         The trained weights, the epochs run and the per-epoch error counts.
     """
     if schedule not in ("interleaved", "blocked"):
-        raise ValueError(f"schedule must be 'interleaved' or 'blocked', got {schedule!r}")
+        raise UserError(f"schedule must be 'interleaved' or 'blocked', got {schedule!r}")
     key_init, key_train = jax.random.split(key)
-    weights = init_weights(key_init, params.w_low, params.w_high)
-    seed = hash_seed(key_train)
+    weights = cpg_weights_init(params.w_low, params.w_high, key=key_init)
+    seed = hash_seed(key=key_train)
     n_steps = train_cycles * PERIOD
     errors = jnp.zeros((max_epochs,), jnp.float32)
 

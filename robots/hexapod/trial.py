@@ -12,7 +12,7 @@ from robots.hexapod.training import TrainParams, gait_correct, train
 
 
 class GaitTrialParams(NamedTuple):
-    """Traced parameters of a gait-convergence trial (see :class:`TrainParams`)."""
+    """Traced parameters of a gait-convergence trial (see `TrainParams`)."""
 
     n_gaits: int = 3
     alpha: float = 2.0
@@ -49,7 +49,7 @@ def convergence_trial(
 ) -> GaitTrialResult:
     """Train an SCPG on G1..G(n_gaits) and check each trained gait from rest for ``eval_cycles`` cycles."""
     p = TrainParams(*(jnp.asarray(v, jnp.float32) for v in params))
-    result = train(p, key, train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule)
+    result = train(p, train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule, key=key)
     ok = gait_correct(p, result.weights, eval_cycles)
     trained = jnp.arange(N_GAITS) < p.n_gaits
     return GaitTrialResult(
@@ -73,11 +73,11 @@ def replay_trial(
 ):
     """Re-run the trial of ``seed`` from a sweep table and return what it learned.
 
-    The key is the sweep engine's (:func:`spikejax.sweep.trial_key`), so the
+    The key is the sweep engine's (`spikejax.sweep.trial_key`), so the
     replay is the very trial of the table's row with this seed and these params.
 
     Returns:
-        ``(train_result, rasters)``: the :class:`TrainResult` and the CPG raster
+        ``(train_result, rasters)``: the `TrainResult` and the CPG raster
         of each gait switched on from rest, shape (3, eval_cycles * PERIOD, 6).
     """
     from spikejax import DiscreteLIFParams
@@ -86,7 +86,8 @@ def replay_trial(
     from robots.hexapod.gaits import PERIOD
 
     p = TrainParams(*(jnp.asarray(v, jnp.float32) for v in params))
-    result = train(p, trial_key(base_seed, seed), train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule)
+    result = train(p, train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule,
+                   key=trial_key(base_seed, seed))
     neuron = DiscreteLIFParams(alpha=p.alpha, v_th=p.v_th)
     rasters = jnp.stack([run_gait(neuron, result.weights, g, eval_cycles * PERIOD) for g in range(N_GAITS)])
     return result, rasters

@@ -95,15 +95,15 @@ from robots.common import run_isolated
 from robots.robobee import bench_network
 from robots.robobee.controller import TORQUE_UNIT
 from robots.robobee.controller import ControllerConfig
+from robots.robobee.controller import controller_init
 from robots.robobee.controller import controller_params
-from robots.robobee.controller import init_controller
 from robots.robobee.flight import flight_plan
 from robots.robobee.flight import fly
-from robots.robobee.lqr import altitude_gains
+from robots.robobee.lqr import altitude_params
 from robots.robobee.lqr import lateral_gain
-from robots.robobee.params import default_params
 from robots.robobee.params import max_lift
 from robots.robobee.params import randomize
+from robots.robobee.params import robobee_params
 from spikejax.devices import cpu_devices_for_run
 from spikejax.devices import shard_batch
 from spikejax.errors import UserError
@@ -200,14 +200,14 @@ def flight_setup(batch: int, seed: int, randomize_robots: bool = False) -> Fligh
 
     The robots are the nominal one, or drawn by `randomize` from ``key(seed + 1)``.
     """
-    robot = default_params()
+    robot = robobee_params()
     keys = jax.vmap(network_key, in_axes=(None, 0))(seed, jnp.arange(batch))
     if randomize_robots:
-        robots = jax.vmap(randomize, in_axes=(None, 0))(robot, jax.random.split(jax.random.key(seed + 1), batch))
+        robots = jax.vmap(lambda k: randomize(robot, key=k))(jax.random.split(jax.random.key(seed + 1), batch))
     else:
         robots = jax.tree.map(lambda x: jnp.broadcast_to(x, (batch,)), robot)
     K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
-    return FlightSetup(ControllerConfig(), controller_params(), robots, K, altitude_gains(), flight_plan("waypoints"),
+    return FlightSetup(ControllerConfig(), controller_params(), robots, K, altitude_params(), flight_plan("waypoints"),
                        keys)
 
 
@@ -274,8 +274,8 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
     hold_steps, segment_steps = flight_steps(timed)
 
     def one(robot, key):
-        return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, key, jnp.bool_(True),
-                   hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY)
+        return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, jnp.bool_(True),
+                   hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY, key=key)
 
     if devices > jax.device_count():
         raise UserError(f"{devices} devices asked, JAX presents {jax.device_count()}")
@@ -310,7 +310,7 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
 class Brian2Flight:
     """One closed-loop flight in Brian2's runtime mode: the network in Brian2, the rest in a network operation.
 
-    The network is the one `init_controller` draws from ``key`` (the same
+    The network is the one `controller_init` draws from ``key`` (the same
     weights, connectivity and thresholds as the spikejax flight of that key);
     the controller's constants are ``cparams``'s. The schedule and the network
     operation are described in the module's notes.
@@ -321,7 +321,7 @@ class Brian2Flight:
         segment_steps: steps spent on each waypoint.
         learn: apply Eq. (10) (the traces run either way), as `controller_step`'s ``learn``.
         use_snn: the decoded output steers (else the teacher does, the SNN learning beside it).
-        robot: the flown robot (`default_params` if None); the teacher is designed for the nominal one.
+        robot: the flown robot (`robobee_params` if None); the teacher is designed for the nominal one.
         record_every: the recording's sampling, as in `fly`.
 
     Attributes:
@@ -339,12 +339,12 @@ class Brian2Flight:
         self.hold_steps, self.segment_steps, self.record_every = hold_steps, segment_steps, record_every
         self.n_steps = hold_steps + 2 * segment_steps
         self.learn, self.use_snn = learn, use_snn
-        state = jax.tree.map(lambda x: np.asarray(x, np.float64), init_controller(config, cp, key))
+        state = jax.tree.map(lambda x: np.asarray(x, np.float64), controller_init(config, cp, key=key))
         self.state0 = state
-        nominal = default_params()
+        nominal = robobee_params()
         self.robot = jax.tree.map(np.float64, nominal if robot is None else robot)
         self.K = np.asarray(jnp.asarray(lateral_gain(nominal), jnp.float32), np.float64).reshape(4)
-        alt = jax.tree.map(f, altitude_gains())
+        alt = jax.tree.map(f, altitude_params())
         self.kp, self.kd, self.cos_min = alt.kp, alt.kd, alt.cos_min
         plan = flight_plan("waypoints")
         self.targets = np.concatenate([np.asarray(plan.q0, np.float64)[None], np.asarray(plan.waypoints, np.float64)])

@@ -31,6 +31,7 @@ output for the short lag the closed loop needs, see `controller_params`.)
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -42,6 +43,7 @@ from spikejax.coding import antagonist_currents
 from spikejax.coding import decoder_init
 from spikejax.coding import decoder_step
 from spikejax.coding import shift_scale
+from spikejax.errors import UserError
 from spikejax.neurons import LIFParams
 from spikejax.neurons import LIFState
 from spikejax.neurons import lif_init
@@ -64,7 +66,7 @@ __all__ = [
     "ControllerParams",
     "ControllerState",
     "controller_params",
-    "init_controller",
+    "controller_init",
     "controller_step",
 ]
 
@@ -76,14 +78,17 @@ TORQUE_UNIT = 1e-6
 _RULE = reward_modulated_hebbian()
 # Rows gathered per pass by `spikejax.synapses.propagate` (input->hidden, hidden->output).
 # Flight 1 has 5.0 and 2.8 spikes a step on average, up to 67 and 62 in bursts; under
-# vmap the busiest flight sets the passes. Measured at 256 flights over two CPU devices
-# (us of wall time per flight-step): (8, 6) 1.79, (12, 8) 1.66, (16, 8) 1.80, (16, 12) 1.71,
-# (24, 12) 1.88: small passes win.
+# vmap the busiest flight sets the passes, and small passes were the fastest
+# (measured: docs/BENCHMARKS.md, "RoboBee closed loop", notes).
 MAX_ROWS = (12, 8)
 
 
-class ControllerConfig(NamedTuple):
+@dataclasses.dataclass(frozen=True)
+class ControllerConfig:
     """Static structure of the network (a change recompiles).
+
+    A frozen dataclass, hashable and not a pytree: ``jit`` takes it as a static
+    argument (``static_argnames``) and never traces its sizes.
 
     Attributes:
         n_per_input: neurons per input group (4 groups: theta, theta_dot, x, x_dot).
@@ -230,8 +235,9 @@ def controller_params(
     The defaults make the 200-100-50 network follow a teacher ``y = -K q`` of
     about unit amplitude (a sum of sinusoids of 0.4-0.7 Hz, learning on) to an
     RMS error of 4-5 % of the teacher's RMS within 0.25 s of learning, for every
-    seed tried (``tests/test_robobee_controller.py``). The percentages below
-    are that error, mean over 8 seeds, with one default changed.
+    seed tried (``tests/test_robobee_controller.py``). The tracking error with
+    one default changed at a time is in docs/BENCHMARKS.md, "RoboBee controller
+    tuning".
 
     Args:
         dt: neural time step, s. 0.1 ms resolves the 2 ms refractory period and
@@ -247,7 +253,7 @@ def controller_params(
             different rectified feature of its variable.
         tau_input: input membrane time constant, s. 2 ms: a fast input layer
             follows the state closely and spikes most per unit current, which
-            lowers the decoded noise (4.5 % against 7 % at 5 ms).
+            lowers the decoded noise.
         tau_hidden: hidden membrane time constant, s (10 ms, between the others).
         tau_output: output membrane time constant, s. 20 ms; Section III orders
             ``tau_input < tau_hidden < tau_output``.
@@ -268,25 +274,20 @@ def controller_params(
             ``nu`` in Hz: 100 Hz is 0 and 50 or 150 Hz is -1 or +1, the torque limit.
         beta: decoder decay rate, 1/s. 100/s (a 10 ms window) keeps the
             decoder's lag well inside the closed loop's bandwidth (LQR poles up to
-            32/s; the robot's unstable pair grows at 7.5/s): with 20/s (50 ms) every
-            SNN flight tumbled, with 100-200/s all reach both waypoints
-            (``tests/test_robobee_flight.py``). Open loop, a longer window is
-            smoother (20/s gives 4-5 % tracking error).
+            32/s; the robot's unstable pair grows at 7.5/s), so the SNN flights
+            reach both waypoints (``tests/test_robobee_flight.py``); open loop, a
+            longer window is smoother.
         gamma: decoder offset, units of `TORQUE_UNIT`.
         mu_hidden: learning rate of the input->hidden weights.
         mu_output: learning rate of the hidden->output weights. 1e-3: in closed
-            loop the network must follow the teacher within tens of ms (1e-4 and
-            1e-2 tumble, 3e-3 sometimes). Open loop, measured at 1e-4: a
-            presynaptic neuron firing at 100 Hz (mean ``r`` about 1.4 at
+            loop the network must follow the teacher within tens of ms. At 1e-4,
+            a presynaptic neuron firing at 100 Hz (mean ``r`` about 1.4 at
             ``tau_reward = 5 ms``) moves its weights by up to 1.4 per second,
-            fast enough to follow a teacher varying at about 1 Hz: 3e-5 lags
-            (6.5 %), 3e-4 does as well (4.6 %) and chatters more after a long
-            run; the output layer alone at 1e-3 gives 7.7 %, the input layer
-            alone at 1e-4 6.1 %.
+            fast enough to follow a teacher varying at about 1 Hz open loop.
         tau_reward: reward time constant, s. A presynaptic spike's factor in
-            Eq. (9) falls as ``exp(-k dt / tau)`` after ``k`` steps, so the trace
-            lasts about ``sqrt(2 tau dt) = 1 ms`` (138 units of ``r`` per spike);
-            2 ms (48 per spike) gives 5.5 %, 10 ms 4.4 %.
+            Eq. (9) of the RoboBee paper falls as ``exp(-k dt / tau)`` after ``k``
+            steps, so the trace lasts about ``sqrt(2 tau dt) = 1 ms`` (138 units
+            of ``r`` per spike).
         dtype: floating dtype of every field.
 
     Returns:
@@ -320,9 +321,9 @@ def _validate(config: ControllerConfig) -> None:
     for name in ("n_per_input", "n_hidden", "n_output"):
         n = getattr(config, name)
         if not isinstance(n, int) or n < 1:
-            raise ValueError(f"ControllerConfig.{name} must be a positive int, got {n!r}")
+            raise UserError(f"ControllerConfig.{name} must be a positive int, got {n!r}")
     if not 0.0 < config.connectivity <= 1.0:
-        raise ValueError(
+        raise UserError(
             f"ControllerConfig.connectivity must lie in (0, 1], got {config.connectivity!r}"
         )
 
@@ -341,8 +342,8 @@ def _lif(params: ControllerParams, tau: jax.Array, v_th: jax.Array) -> LIFParams
     )
 
 
-def init_controller(
-    config: ControllerConfig, params: ControllerParams, key: jax.Array
+def controller_init(
+    config: ControllerConfig, params: ControllerParams, *, key: jax.Array
 ) -> ControllerState:
     """Draws a network as in Section V of the RoboBee paper and puts it at rest.
 
@@ -360,7 +361,7 @@ def init_controller(
         The initial state.
 
     Raises:
-        ValueError: if a size is not a positive int or ``connectivity`` is not in (0, 1].
+        UserError: if a size is not a positive int or ``connectivity`` is not in (0, 1].
     """
     _validate(config)
     n_in, n_h, n_out = config.n_input, config.n_hidden, config.n_output

@@ -97,8 +97,8 @@ def rhs(q, params: RoboBeeParams, f_lift, tau_c):
         shape ``(6,)``.
 
     Examples:
-        >>> from robots.robobee.params import default_params
-        >>> p = jax.tree.map(np.float64, default_params())
+        >>> from robots.robobee.params import robobee_params
+        >>> p = jax.tree.map(np.float64, robobee_params())
         >>> q_dot = rhs(np.zeros(6), p, p.mass * p.g, 0.0)  # hover
         >>> bool(np.allclose(q_dot, 0.0))
         True

@@ -26,11 +26,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from robots.robobee.controller import TORQUE_UNIT, ControllerConfig, ControllerParams, controller_step, init_controller
+from robots.robobee.controller import TORQUE_UNIT, ControllerConfig, ControllerParams, controller_init, controller_step
 from robots.robobee.dynamics import LATERAL
-from robots.robobee.lqr import AltitudeGains, altitude_control, lateral_lqr
+from robots.robobee.lqr import AltitudeParams, altitude_control, lateral_lqr
 from robots.robobee.params import RoboBeeParams
 from robots.robobee.physics import data_at, load_model, physics_step, state_of
+from spikejax.errors import UserError
 
 # Sec. V of the RoboBee paper: initial state and the two waypoints of flight 1.
 Q0 = (-0.6, 0.0, 0.0, 0.02, 0.0, 0.0)
@@ -86,7 +87,7 @@ def flight_plan(name: str) -> FlightPlan:
     """``"waypoints"`` (flight 1: q0 -> q1 -> q2) or ``"landing"`` (flight 2)."""
     plans = {"waypoints": (Q0, (Q1, Q2)), "landing": (LANDING_Q0, (LANDING_Q1, LANDING_Q2))}
     if name not in plans:
-        raise ValueError(f"flight must be one of {sorted(plans)}, got {name!r}")
+        raise UserError(f"flight must be one of {sorted(plans)}, got {name!r}")
     q0, waypoints = plans[name]
     return FlightPlan(jnp.asarray(q0, jnp.float32), jnp.asarray(waypoints, jnp.float32))
 
@@ -96,14 +97,14 @@ def fly(
     cparams: ControllerParams,
     robot: RoboBeeParams,
     K: jax.Array,
-    altitude: AltitudeGains,
+    altitude: AltitudeParams,
     plan: FlightPlan,
-    key: jax.Array,
     use_snn: jax.Array,
     *,
     hold_steps: int = 5000,
     segment_steps: int = 10000,
     record_every: int = 10,
+    key: jax.Array,
 ) -> Recording:
     """Fly ``plan`` with the SNN (``use_snn`` true) or the LQR on the lateral axis.
 
@@ -117,11 +118,11 @@ def fly(
         K: LQR gain, N m per unit of the lateral state, shape (4,) or (1, 4).
         altitude: gains of the altitude controller.
         plan: initial state and waypoints.
-        key: the network's PRNG key (connectivity, weights, thresholds).
         use_snn: bool scalar: who applies the lateral torque.
         hold_steps: steps of the initial hold (static; 5000 = 500 ms).
         segment_steps: steps spent on each waypoint (static).
         record_every: sampling of the recording (static); ``hold_steps`` and ``segment_steps`` are multiples of it.
+        key: the network's PRNG key (connectivity, weights, thresholds).
 
     Returns:
         The flight, sampled every ``record_every`` steps.
@@ -130,7 +131,7 @@ def fly(
     n_waypoints = plan.waypoints.shape[0]
     n_steps = hold_steps + n_waypoints * segment_steps
     if hold_steps % record_every or segment_steps % record_every:
-        raise ValueError(f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
+        raise UserError(f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
                          f"record_every ({record_every})")
     lat = jnp.asarray(LATERAL)
     targets = jnp.concatenate([plan.q0[None], plan.waypoints])
@@ -161,7 +162,7 @@ def fly(
         means = jax.lax.cond(sample, weight_means, lambda _: means, carry[1])
         return (*carry, means), (q[-1], target[-1], y_hat[-1], y_lqr[-1], means[0], means[1])
 
-    ctrl = init_controller(config, cparams, key)
+    ctrl = controller_init(config, cparams, key=key)
     carry = (data_at(model, plan.q0), ctrl, weight_means(ctrl))
     blocks = jnp.arange(n_steps).reshape(-1, record_every)
     n_hold = hold_steps // record_every

@@ -26,10 +26,10 @@ from robots.robobee.params import RoboBeeParams
 from robots.robobee.params import max_lift
 
 __all__ = [
-    "AltitudeGains",
+    "AltitudeParams",
     "LATERAL_SCALES",
     "altitude_control",
-    "altitude_gains",
+    "altitude_params",
     "bryson_weights",
     "lateral_gain",
     "lateral_lqr",
@@ -175,7 +175,7 @@ def lateral_lqr(K: jax.Array, q: jax.Array, q_target: jax.Array) -> jax.Array:
     return -jnp.reshape(jnp.asarray(K, q.dtype), (4,)) @ e
 
 
-class AltitudeGains(NamedTuple):
+class AltitudeParams(NamedTuple):
     """Gains of `altitude_control`.
 
     Attributes:
@@ -191,8 +191,8 @@ class AltitudeGains(NamedTuple):
     cos_min: jax.Array
 
 
-def altitude_gains(kp=100.0, kd=20.0, cos_min=0.5, dtype=jnp.float32) -> AltitudeGains:
-    """`AltitudeGains`; the defaults are a critically damped ``10 rad/s`` loop.
+def altitude_params(kp=100.0, kd=20.0, cos_min=0.5, dtype=jnp.float32) -> AltitudeParams:
+    """`AltitudeParams`; the defaults are a critically damped ``10 rad/s`` loop.
 
     Args:
         kp: 1/s^2 (``omega^2``).
@@ -204,11 +204,11 @@ def altitude_gains(kp=100.0, kd=20.0, cos_min=0.5, dtype=jnp.float32) -> Altitud
         The gains.
     """
     f = lambda x: jnp.asarray(x, dtype)  # noqa: E731
-    return AltitudeGains(kp=f(kp), kd=f(kd), cos_min=f(cos_min))
+    return AltitudeParams(kp=f(kp), kd=f(kd), cos_min=f(cos_min))
 
 
 def altitude_control(
-    gains: AltitudeGains, q: jax.Array, q_target: jax.Array, params: RoboBeeParams
+    gains: AltitudeParams, q: jax.Array, q_target: jax.Array, params: RoboBeeParams
 ) -> jax.Array:
     """The altitude controller ``u_alt``: PD on ``z`` with gravity and tilt compensation.
 

@@ -13,9 +13,9 @@ import jax.numpy as jnp
 
 __all__ = [
     "RoboBeeParams",
-    "default_params",
     "max_lift",
     "randomize",
+    "robobee_params",
 ]
 
 
@@ -44,7 +44,7 @@ class RoboBeeParams(NamedTuple):
     torque_limit: jax.Array
 
 
-def default_params(
+def robobee_params(
     mass=80e-6,
     inertia_y=1.4e-9,
     b_w=2.0e-4,
@@ -95,7 +95,7 @@ def default_params(
         The parameters, each a scalar array.
 
     Examples:
-        >>> p = default_params()
+        >>> p = robobee_params()
         >>> float(max_lift(p)) > float(p.mass * p.g)
         True
     """
@@ -116,7 +116,7 @@ def max_lift(params: RoboBeeParams) -> jax.Array:
     return params.lift_limit * params.mass * params.g
 
 
-def randomize(params: RoboBeeParams, key: jax.Array, spread=0.2) -> RoboBeeParams:
+def randomize(params: RoboBeeParams, spread=0.2, *, key: jax.Array) -> RoboBeeParams:
     """A robot whose mass, drag and inertia differ from ``params`` by up to ``spread``.
 
     Each of ``mass``, ``b_w`` and ``inertia_y`` is multiplied by its own factor
@@ -126,15 +126,15 @@ def randomize(params: RoboBeeParams, key: jax.Array, spread=0.2) -> RoboBeeParam
 
     Args:
         params: the nominal robot.
-        key: PRNG key, used once.
         spread: relative half-width of the uniform factors, in ``[0, 1)`` (0.2
             gives +-20 %); may be traced.
+        key: PRNG key, used once.
 
     Returns:
         The randomized parameters, same dtypes as ``params``.
 
     Examples:
-        >>> p = randomize(default_params(), jax.random.key(0))
+        >>> p = randomize(robobee_params(), key=jax.random.key(0))
         >>> bool(0.8 <= p.mass / 80e-6 <= 1.2)
         True
     """

@@ -204,8 +204,8 @@ def physics_step(
         The data at ``t + dt``.
 
     Examples:
-        >>> from robots.robobee.params import default_params
-        >>> p, model = default_params(), load_model()
+        >>> from robots.robobee.params import robobee_params
+        >>> p, model = robobee_params(), load_model()
         >>> d = data_at(model, jnp.zeros(6).at[3].set(0.05))
         >>> q = state_of(physics_step(model, d, p, p.mass * p.g, 0.0))  # hover
         >>> bool(jnp.allclose(q, jnp.array([0.0, 0.0, 0.0, 0.05, 0.0, 0.0]), atol=1e-6))

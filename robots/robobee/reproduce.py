@@ -33,8 +33,8 @@ from spikejax.stats import wilson_interval
 from robots.common import run_named_sweep, write_csv
 from spikejax.sweep import trial_key
 from robots.robobee.controller import ControllerConfig, controller_params
-from robots.robobee.lqr import altitude_gains
-from robots.robobee.params import default_params
+from robots.robobee.lqr import altitude_params
+from robots.robobee.params import robobee_params
 
 FLIGHTS = {0: "flight 1 (q0 -> q1 -> q2)", 1: "flight 2 (landing)"}
 
@@ -70,11 +70,11 @@ def _replay(landing: int, seed: int = 0):
     from robots.robobee.flight import flight_plan, fly
     from robots.robobee.trial import nominal_gain
 
-    robot = default_params()
+    robot = robobee_params()
     plan = flight_plan("landing" if landing else "waypoints")
     key_net, _ = jax.random.split(trial_key(0, seed))
     run = jax.jit(lambda use: fly(ControllerConfig(), controller_params(), robot, jnp.asarray(nominal_gain()),
-                                  altitude_gains(), plan, key_net, use))
+                                  altitude_params(), plan, use, key=key_net))
     return plan, jax.device_get(run(True)), jax.device_get(run(False))
 
 

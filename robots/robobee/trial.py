@@ -11,8 +11,8 @@ import numpy as np
 
 from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.flight import FlightPlan, Recording, flight_plan, fly
-from robots.robobee.lqr import altitude_gains, lateral_gain
-from robots.robobee.params import default_params, randomize
+from robots.robobee.lqr import altitude_params, lateral_gain
+from robots.robobee.params import randomize, robobee_params
 
 # A waypoint counts as reached within this distance (x, z) at the end of its segment.
 REACHED_M = 5e-3
@@ -68,7 +68,7 @@ class FlightTrialResult(NamedTuple):
 def nominal_gain() -> np.ndarray:
     """The LQR gain of the nominal robot, computed once on the host, shape (4,)."""
     with jax.ensure_compile_time_eval():
-        return np.asarray(lateral_gain(default_params()), np.float32).reshape(4)
+        return np.asarray(lateral_gain(robobee_params()), np.float32).reshape(4)
 
 
 def _plan(landing: jax.Array) -> FlightPlan:
@@ -117,7 +117,7 @@ def flight_trial(
 ) -> FlightTrialResult:
     """Fly one RoboBee (flight 1 or the landing) with a fresh SNN learning online from the LQR."""
     key_net, key_robot = jax.random.split(key)
-    robot = randomize(default_params(), key_robot, params.spread)
+    robot = randomize(robobee_params(), params.spread, key=key_robot)
     K = jnp.asarray(nominal_gain())
     cparams = controller_params()._replace(
         mu_hidden=jnp.asarray(params.mu, jnp.float32),
@@ -126,6 +126,6 @@ def flight_trial(
     )
     config = ControllerConfig(n_per_input=n_per_input, n_hidden=n_hidden, n_output=n_output)
     plan = _plan(jnp.asarray(params.landing))
-    rec = fly(config, cparams, robot, K, altitude_gains(), plan, key_net, jnp.asarray(params.use_snn) > 0,
-              hold_steps=hold_steps, segment_steps=segment_steps, record_every=record_every)
+    rec = fly(config, cparams, robot, K, altitude_params(), plan, jnp.asarray(params.use_snn) > 0,
+              hold_steps=hold_steps, segment_steps=segment_steps, record_every=record_every, key=key_net)
     return summarize(rec, plan, hold_steps, segment_steps, record_every)

@@ -50,7 +50,7 @@ from mujoco import rollout as mj_rollout
 from robots.common import run_isolated
 from robots.common import write_csv
 from robots.snake.env import SnakeEnv
-from robots.snake.gait import default_gait
+from robots.snake.gait import gait_params
 from robots.snake.gait import joint_targets
 from robots.snake.physics import make_physics
 from spikejax.errors import UserError
@@ -104,7 +104,7 @@ def bench_c_physics(batch: int, n: int, *, nthread: int | None = None, repeats: 
     phys = make_physics("mujoco")
     model = phys.mj_model
     nthread = nthread or os.cpu_count() or 1
-    gait = default_gait()
+    gait = gait_params()
     times = jnp.arange(n) * phys.dt * phys.substeps
     targets = jax.jit(jax.vmap(lambda s: jax.vmap(lambda t: joint_targets(gait, t, s))(times)))(_steers(batch))
     control = np.repeat(np.asarray(targets, np.float64), phys.substeps, axis=1)  # (batch, n * substeps, 16)
@@ -149,7 +149,7 @@ def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2) -> 
     env, run = _env_run(backend)
     phys = env.physics
     keys = jax.random.split(jax.random.key(0), batch)
-    steers = jnp.asarray(_steers(batch) / env.max_steer, jnp.float32)
+    steers = jnp.asarray(_steers(batch) / float(env.params.max_steer), jnp.float32)
     fn = jax.jit(jax.vmap(lambda k, s: run(k, s, n)))
     t0 = time.perf_counter()
     compiled = fn.lower(keys, steers).compile()

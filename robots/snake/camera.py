@@ -3,7 +3,7 @@
 The camera is the site ``head_camera`` of ``snake.xml``, at the front face of
 the head module, looking along the head's +x with +z up; its world pose is in
 the physics state (``head_pos``, ``head_mat``), whichever backend produced it,
-and its frame axes (forward, left, up) are those :func:`spikejax.vision.render.render`
+and its frame axes (forward, left, up) are those `spikejax.vision.render.render`
 expects, so the head's rotation matrix is the camera's.
 
 The scene is the papers' world: the target sphere of radius 0.3 m resting on
@@ -22,21 +22,21 @@ import jax
 import jax.numpy as jnp
 
 from robots.snake.tracks import TARGET_RADIUS
-from spikejax.vision import render as R
+from spikejax.vision import render
 
-HEAD_CAMERA = R.Camera(width=128, height=128, fov=math.radians(60.0))  # DVS128; fovy=60 in snake.xml
+HEAD_CAMERA = render.Camera(width=128, height=128, fov=math.radians(60.0))  # DVS128; fovy=60 in snake.xml
 TARGET_BRIGHTNESS = 0.08
 GROUND_BRIGHTNESS = 0.4
 SKY_BRIGHTNESS = 0.8
 
 
-def scene(target_xy, pipes: R.Cylinders | None = None, target_radius: float = TARGET_RADIUS) -> R.Scene:
+def scene(target_xy, pipes: render.Cylinders | None = None, target_radius: float = TARGET_RADIUS) -> render.Scene:
     """The target sphere resting on the ground at ``target_xy`` (2,), the ground, the sky and ``pipes``."""
     target_xy = jnp.asarray(target_xy, jnp.float32)
     center = jnp.concatenate([target_xy, jnp.full((1,), target_radius, jnp.float32)])
-    return R.Scene(
-        spheres=R.spheres(center, target_radius, TARGET_BRIGHTNESS),
-        cylinders=R.no_cylinders() if pipes is None else pipes,
+    return render.Scene(
+        spheres=render.spheres(center, target_radius, TARGET_BRIGHTNESS),
+        cylinders=render.no_cylinders() if pipes is None else pipes,
         ground_height=0.0,
         ground_brightness=GROUND_BRIGHTNESS,
         sky_brightness=SKY_BRIGHTNESS,
@@ -48,7 +48,7 @@ def pose(phys) -> tuple[jax.Array, jax.Array]:
     return phys.head_pos, phys.head_mat
 
 
-def frame(phys, world: R.Scene, camera: R.Camera = HEAD_CAMERA) -> jax.Array:
+def frame(phys, world: render.Scene, camera: render.Camera = HEAD_CAMERA) -> jax.Array:
     """The head camera's ``(128, 128)`` grey-level frame of ``world`` for the physics state ``phys``."""
     pos, rot = pose(phys)
-    return R.render(world, pos, rot, camera)
+    return render.render(world, pos, rot, camera)

@@ -1,17 +1,17 @@
 """The snake's target-tracking task as a Brax ``Env``: steer the slithering gait after a moving sphere.
 
-:class:`SnakeEnv` subclasses :class:`brax.envs.base.Env` and returns Brax's
-:class:`~brax.envs.base.State`, so Brax's wrappers and trainers (e.g. PPO)
+`SnakeEnv` subclasses `brax.envs.base.Env` and returns Brax's
+`brax.envs.base.State`, so Brax's wrappers and trainers (e.g. PPO)
 drive it as they drive their own envs, and the SNN controllers of the snake
 papers drive it through the same ``reset`` / ``step``.
 
 One ``step`` is one control step (20 ms, the snake R-STDP paper's): the gait of Eq. (1)
-(:func:`robots.snake.gait.joint_targets`) is evaluated at the step's start
+(`robots.snake.gait.joint_targets`) is evaluated at the step's start
 with the action's steering and head offset and held by the servos while the
-physics backend (``"mujoco"`` or ``"mjx"``, :func:`robots.snake.physics.make_physics`)
-advances; then the target moves along its track (:func:`robots.snake.tracks.advance`),
-the head camera renders the scene (:mod:`robots.snake.camera`) and the
-frame-difference DVS (:func:`spikejax.vision.dvs.frame_difference`, the
+physics backend (``"mujoco"`` or ``"mjx"``, `robots.snake.physics.make_physics`)
+advances; then the target moves along its track (`robots.snake.tracks.advance`),
+the head camera renders the scene (`robots.snake.camera`) and the
+frame-difference DVS (`spikejax.vision.dvs.frame_difference`, the
 papers' simulator mode) turns the change since the last frame into events.
 
 Spaces:
@@ -26,13 +26,17 @@ Spaces:
   target is on the right) and the 16 joint angles (radians, joint 1 at the
   head). A flat vector, as Brax's trainers expect.
 * ``info["events"]``: the DVS events of the control step, a fixed-capacity
-  :class:`spikejax.vision.Events` (``event_capacity`` slots, stamped with the
+  `spikejax.vision.Events` (``event_capacity`` slots, stamped with the
   step's end time) with ``info["overflow"]`` counting those that did not fit.
   They live in ``info`` rather than ``obs`` because an event buffer is not a
   flat vector; the SNN controllers read them from there. ``info["frame"]`` is
   the camera's last grey-level frame (the reference for the next step's
   events).
 * ``reward = -|a_head|``: the head should face the target.
+* ``info["params"]``: the episode's `SnakeEnvParams` (``max_steer``,
+  ``max_head_offset``, ``target_speed``, ``event_threshold``), traced, so that
+  a sweep vmaps over them with one compiled program; the constructor's values
+  unless ``reset(rng, params=...)`` was given others.
 * ``done = 1`` when the target is lost, the paper's reset rule (section III-B):
   ``|a_head| > 40`` degrees, or the mean of ``a_body`` over the last gait
   period beyond 35 degrees (the paper's 625-step window is "a movement period
@@ -44,7 +48,7 @@ is turned left; the head offset here is positive to the right, so
 
 The track is static (``track=``); ``reset(rng, mirror=...)`` mirrors it about
 the x axis, which is how the training track alternates direction each episode
-(:func:`robots.snake.tracks.training_mirror`). A ``step`` from a state at time
+(`robots.snake.tracks.training_mirror`). A ``step`` from a state at time
 0 starts the episode afresh (target at the start, no events, empty angle
 window), so Brax's ``AutoResetWrapper``, which puts back only the physics state
 and the observation, restarts the whole task. The tracks are laid out in the
@@ -56,7 +60,7 @@ Brax's interface and kept in ``info["rng"]``.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -64,28 +68,51 @@ import numpy as np
 from brax.envs.base import Env, State
 
 from robots.snake import camera as cam
-from robots.snake import tracks as T
-from robots.snake.gait import GaitParams, default_gait, gait_period, joint_targets
+from robots.snake import tracks
+from robots.snake.gait import GaitParams, gait_params, gait_period, joint_targets
 from robots.snake.physics import CONTROL_DT, joint_qpos_index, make_physics
 from spikejax.errors import UserError
 from spikejax.vision import dvs
-from spikejax.vision import render as R
+from spikejax.vision import render
+
+__all__ = ["LOST_BODY_ANGLE", "LOST_HEAD_ANGLE", "SNAKE_SPEED", "SnakeEnv", "SnakeEnvParams", "rollout"]
 
 SNAKE_SPEED = 0.108  # m/s, straight gait with the default GaitParams and tuned physics (measured)
 LOST_HEAD_ANGLE = math.radians(40.0)  # section III-B
 LOST_BODY_ANGLE = math.radians(35.0)  # section III-B
 
 
+class SnakeEnvParams(NamedTuple):
+    """The task's traced quantities, those a sweep may vary: ``jax.vmap`` over them compiles once.
+
+    `SnakeEnv` builds them from its constructor's arguments (``env.params``);
+    ``env.reset(rng, params=...)`` starts an episode with others, which
+    ``step`` reads from ``state.info["params"]``. Each field is a float32 scalar.
+
+    Attributes:
+        max_steer: ``C_o`` at full action, rad.
+        max_head_offset: head offset at full action, rad.
+        target_speed: the target's speed along the track, m/s.
+        event_threshold: frame-difference threshold on grey levels in (0, 1].
+    """
+
+    max_steer: jax.Array
+    max_head_offset: jax.Array
+    target_speed: jax.Array
+    event_threshold: jax.Array
+
+
 class SnakeEnv(Env):
     """Follow the target sphere along a track with the slithering snake (see the module docstring).
 
     Args:
-        track: one of :data:`robots.snake.tracks.TRACKS`.
+        track: one of `robots.snake.tracks.TRACKS`.
         backend: physics backend, ``"mujoco"`` (MuJoCo C, the choice on a CPU) or ``"mjx"``.
         camera: render the head camera and emit events each step; ``False``
             leaves ``info["events"]`` empty (for controllers that only read the
             angles, and for speed).
-        event_threshold: frame-difference threshold on grey levels in [0, 1].
+        event_threshold: frame-difference threshold on grey levels in (0, 1]
+            (the default of `SnakeEnvParams`, as are the next three).
         event_capacity: event slots per control step.
         target_speed: the target's speed along the track, m/s; "a little faster
             than the snake" (section II-A): 1.2 times its straight speed.
@@ -94,35 +121,33 @@ class SnakeEnv(Env):
         compensate: the gait's head compensation (section II-A).
         gait: the gait's parameters (``C_o`` is replaced by the steering).
         pipes: optional pipes in the scene (track frame, as ``render.Cylinders``).
-        physics_kwargs: passed to :func:`robots.snake.physics.make_physics`.
+        physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
     def __init__(self, track: str = "eight", backend: str = "mujoco", *, camera: bool = True,
                  event_threshold: float = 0.05, event_capacity: int = 2048, target_speed: float = 1.2 * SNAKE_SPEED,
                  max_steer: float = 0.25, max_head_offset: float = 0.5, compensate: bool = True,
-                 gait: GaitParams | None = None, pipes: R.Cylinders | None = None, **physics_kwargs: Any):
+                 gait: GaitParams | None = None, pipes: render.Cylinders | None = None, **physics_kwargs: Any):
         if event_capacity < 1:
             raise UserError(f"event_capacity must be at least 1, got {event_capacity}")
         if not event_threshold > 0:
             raise UserError(f"event_threshold must be positive, got {event_threshold}")
         if not target_speed > 0:
             raise UserError(f"target_speed must be positive, got {target_speed}")
-        self._track = T.get(track)  # raises UserError for an unknown name
+        self._track = tracks.get(track)  # raises UserError for an unknown name
         self.track_name = track
         self.physics = make_physics(backend, **physics_kwargs)
         self._joints = np.asarray(joint_qpos_index(self.physics.mj_model))
         self.camera_on = bool(camera)
-        self.event_threshold = float(event_threshold)
         self.event_capacity = int(event_capacity)
-        self.target_speed = float(target_speed)
-        self.max_steer = float(max_steer)
-        self.max_head_offset = float(max_head_offset)
+        self.params = SnakeEnvParams(*(jnp.asarray(x, jnp.float32) for x in (
+            max_steer, max_head_offset, target_speed, event_threshold)))
         self.compensate = bool(compensate)
-        self.gait = default_gait() if gait is None else gait
+        self.gait = gait_params() if gait is None else gait
         self.pipes = pipes
         self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
         head0 = np.asarray(self.physics.init().head_pos[:2])
-        self.origin = jnp.asarray(head0 - np.asarray(T.START), jnp.float32)  # track frame -> world frame
+        self.origin = jnp.asarray(head0 - np.asarray(tracks.START), jnp.float32)  # track frame -> world frame
 
     # ------------------------------------------------------------ Brax interface
 
@@ -143,8 +168,14 @@ class SnakeEnv(Env):
     def backend(self) -> str:
         return self.physics.backend
 
-    def reset(self, rng: jax.Array, mirror: bool | jax.Array = False) -> State:
-        """The snake at rest at the track's start, the target 1.6 m ahead of its head."""
+    def reset(self, rng: jax.Array, mirror: bool | jax.Array = False, params: SnakeEnvParams | None = None) -> State:
+        """The snake at rest at the track's start, the target 1.6 m ahead of its head.
+
+        ``params`` (default ``self.params``, the constructor's) is kept in
+        ``info["params"]`` for every ``step`` of the episode; it may be traced.
+        """
+        params = self.params if params is None else SnakeEnvParams(
+            *(jnp.asarray(x, jnp.float32) for x in params))
         phys = self.physics.init()
         mirror = jnp.asarray(mirror, bool)
         target_xy = self._target_xy(jnp.float32(0.0), mirror)
@@ -153,11 +184,12 @@ class SnakeEnv(Env):
         zero = jnp.zeros((), jnp.float32)
         info = {
             "rng": rng,
+            "params": params,
             "mirror": mirror,
             "target_s": zero,
             "target_xy": target_xy,
             "frame": frame,
-            "events": dvs.frame_difference(frame, frame, phys.time, threshold=self.event_threshold,
+            "events": dvs.frame_difference(frame, frame, phys.time, threshold=params.event_threshold,
                                            capacity=self.event_capacity)[0],
             "overflow": jnp.zeros((), jnp.int32),
             "body_angles": jnp.zeros((self.window,), jnp.float32),
@@ -169,7 +201,8 @@ class SnakeEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         """One control step (see the module docstring)."""
         action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
-        steer, head_offset = action[0] * self.max_steer, action[1] * self.max_head_offset
+        params = state.info["params"]
+        steer, head_offset = action[0] * params.max_steer, action[1] * params.max_head_offset
         phys = state.pipeline_state
         # A state at time 0 starts an episode, also when Brax's AutoResetWrapper put back only the physics.
         fresh = phys.time == 0.0
@@ -183,13 +216,13 @@ class SnakeEnv(Env):
         mirror = info["mirror"]
         track = self._oriented(mirror)
         head_track = phys.head_pos[:2] - self.origin
-        target_s = T.advance(track, info["target_s"], head_track, self.target_speed, self.dt)
+        target_s = tracks.advance(track, info["target_s"], head_track, params.target_speed, self.dt)
         target_xy = self._target_xy(target_s, mirror)
         a_head, a_body = self._angles(phys, target_xy, -head_offset)
         frame = self._frame(phys, target_xy)
         if self.camera_on:
             previous = jnp.where(fresh, frame, info["frame"])
-            events, overflow = dvs.frame_difference(previous, frame, phys.time, threshold=self.event_threshold,
+            events, overflow = dvs.frame_difference(previous, frame, phys.time, threshold=params.event_threshold,
                                                     capacity=self.event_capacity)
         else:
             events, overflow = info["events"], info["overflow"]
@@ -203,15 +236,15 @@ class SnakeEnv(Env):
 
     # ------------------------------------------------------------ parts
 
-    def _oriented(self, mirror) -> T.Track:
-        mirrored = T.mirror(self._track)
+    def _oriented(self, mirror) -> tracks.Track:
+        mirrored = tracks.mirror(self._track)
         return jax.tree.map(lambda a, b: jnp.where(mirror, b, a), self._track, mirrored)
 
     def _target_xy(self, s, mirror):
-        return T.point(self._oriented(mirror), s) + self.origin
+        return tracks.point(self._oriented(mirror), s) + self.origin
 
     def _angles(self, phys, target_xy, d_head):
-        return T.target_angles(phys.head_pos[:2], phys.head_mat[:2, 0], target_xy, d_head)
+        return tracks.target_angles(phys.head_pos[:2], phys.head_mat[:2, 0], target_xy, d_head)
 
     def _frame(self, phys, target_xy):
         if not self.camera_on:
@@ -234,16 +267,19 @@ class SnakeEnv(Env):
         }
 
 
-def rollout(env: SnakeEnv, policy, policy_state, steps: int, mirror=False, key=None):
+def rollout(env: SnakeEnv, policy, policy_state, steps: int, mirror=False, *, params=None, key=None):
     """Run ``policy`` in ``env`` for ``steps`` control steps in one ``lax.scan``; jit and vmap it.
 
+    ``params`` (a `SnakeEnvParams`, default ``env.params``) and ``key`` (the
+    reset's ``rng``, default ``jax.random.PRNGKey(0)``) are passed to ``env.reset``.
+
     ``policy(policy_state, obs, state) -> (policy_state, action)``. Returns the
-    stacked per-step :class:`State` (without ``info["frame"]``, to keep the
+    stacked per-step `brax.envs.base.State` (without ``info["frame"]``, to keep the
     record small) and the final state. The rollout continues after ``done``;
     ``done`` marks the steps where the target counted as lost.
     """
     key = jax.random.PRNGKey(0) if key is None else key
-    state = env.reset(key, mirror)
+    state = env.reset(key, mirror, params)
 
     def body(carry, _):
         state, pstate = carry

@@ -48,7 +48,7 @@ __all__ = [
     "JOINT_LIMIT",
     "N_JOINTS",
     "GaitParams",
-    "default_gait",
+    "gait_params",
     "gait_period",
     "head_compensation",
     "joint_targets",
@@ -109,7 +109,7 @@ class GaitParams(NamedTuple):
     P_tail: jax.Array | float
 
 
-def default_gait() -> GaitParams:
+def gait_params() -> GaitParams:
     """The straight slithering gait (`GaitParams` documents each value's source)."""
     Omega_o = -2 * math.pi / 16
     omega_o = 2 * math.pi / 2.5
@@ -159,7 +159,7 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
     """Position-servo targets of the 16 joints at ``t``: Eq. (1) of the snake R-STDP paper, steered, head-compensated.
 
     Args:
-        params: the gait (`default_gait`); its ``C_o`` is replaced by ``steer``.
+        params: the gait (`gait_params`); its ``C_o`` is replaced by ``steer``.
         t: time, s (scalar).
         steer: ``C_o`` of Eq. (1) of the snake R-STDP paper, rad: the steering
             input. With the default gait a positive ``steer`` turns the snake
@@ -177,7 +177,7 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
         of +-90 deg; the order of the actuators in ``snake.xml``.
 
     Examples:
-        >>> p = default_gait()
+        >>> p = gait_params()
         >>> alpha = joint_targets(p, 0.0, compensate=False)
         >>> bool(jnp.allclose(alpha[0], p.A_o * jnp.sin(p.Omega_o)))
         True

@@ -40,14 +40,10 @@ turning rate stay within 5 % of the default settings run by MuJoCo's C engine
 (measured over 25 s: speed -1.3 %, turning rate +1 %). CG rather than Newton:
 under ``vmap`` on a CPU, MJX's Newton solver calls LAPACK's batched Cholesky,
 which (jax 0.10.2) can deadlock XLA's intra-op thread pool on two cores; CG
-factorises nothing. Measured on this CPU: Newton with 6 iterations and 6
-line-search iterations stays within 2 % of the default too (with 4 the turning
-rate is 30 % off), and an MJX step of a moving snake takes about 190 us per snake
-with it against about 820 us with CG (batch 64; the solver is 96 % of the CG
-step), but a batch of 256 Newton steps never returned in a process that had
-already stepped snakes through ``mujoco.rollout``'s thread pool, while it
-ran in 7 s in a fresh one. A library cannot tell its users which backends
-they may build in one process, so the tuned model keeps CG.
+factorises nothing. Newton is faster where it returns, but it did not return
+in a process that had already used ``mujoco.rollout``'s thread pool
+(docs/BENCHMARKS.md, "Snake env"), and a library cannot tell its users which
+backends they may build in one process, so the tuned model keeps CG.
 
 XLA trap (``KNOWN-TRAPS.md``): with jax 0.10.2, XLA's fusion pass on a CPU
 took minutes or forever on ``mjx.step`` of a long kinematic chain. The cause:
@@ -57,8 +53,8 @@ next, so the fused expressions, compile time and run time grow exponentially
 with depth. The MJX backend traces ``mjx.step`` with an
 ``optimization_barrier`` after each level (`mjx_level_barriers`, scoped to the
 tracing of this backend's step: other MJX programs are untouched), which keeps
-every level materialised: the snake's step compiles in about 20 s and runs
-ten times faster than with fusion disabled. The model's free joint also sits
+every level materialised and the compile time bounded (measured:
+docs/BENCHMARKS.md, "Snake env"). The model's free joint also sits
 on the middle module, so its tree is two chains of 8 rather than one of 16.
 `forward_kinematics` avoids the trap by scanning along the chains.
 """
@@ -66,6 +62,7 @@ on the middle module, so its tree is two chains of 8 rather than one of 16.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import os
 import pathlib
@@ -309,8 +306,13 @@ def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float | Non
 # ----------------------------------------------------------------- backends
 
 
-class SnakePhysics(NamedTuple):
+@dataclasses.dataclass(frozen=True, eq=False)
+class SnakePhysics:
     """One snake's physics: ``init() -> PhysState``, ``step(state, ctrl) -> PhysState``.
+
+    Static configuration: a frozen dataclass, not a pytree (it holds the MuJoCo
+    model and the two functions), hashed by identity, so it can be closed over
+    or passed to ``jit`` as a static argument; the traced state is `PhysState`.
 
     Attributes:
         backend: ``"mujoco"`` or ``"mjx"``.

@@ -41,7 +41,7 @@ from spikejax.commands import Command, add_common
 from robots.common import write_csv
 from robots.snake import steering
 from robots.snake import tracks
-from robots.snake.gait import default_gait, gait_period, joint_targets
+from robots.snake.gait import gait_params, gait_period, joint_targets
 from spikejax.errors import UserError
 
 if TYPE_CHECKING:
@@ -82,7 +82,7 @@ def gait_rollouts(periods: int = GAIT_PERIODS, steers=STEERS):
     from robots.snake.physics import forward_kinematics, make_physics
 
     phys = make_physics("mujoco")
-    gait = default_gait()
+    gait = gait_params()
     n = int(round(periods * float(gait_period(gait)) / (phys.dt * phys.substeps)))
     cases = [(s, True) for s in steers] + [(0.0, False)]
 
@@ -100,7 +100,7 @@ def gait_rollouts(periods: int = GAIT_PERIODS, steers=STEERS):
 
 def gait_rows(cases, time, com, yaw) -> list[list]:
     """The rows of ``snake_gait.csv`` (see the module docstring)."""
-    period = float(gait_period(default_gait()))
+    period = float(gait_period(gait_params()))
     dt = float(time[1] - time[0])
     per = int(round(period / dt))
     rows = []
@@ -152,7 +152,7 @@ def camera_run(steps: int = STRIP_STEPS):
 
     def body(carry, _):
         state, pstate = carry
-        pstate, action = steering.act(params, pstate, state.obs, env.dt)
+        pstate, action = steering.step(params, pstate, state.obs, env.dt)
         state = env.step(state, action)
         return (state, pstate), (state.info["frame"], state.info["events"], state.pipeline_state.qpos,
                                  state.info["target_xy"], state.metrics["a_head"])
@@ -217,7 +217,7 @@ def track_runs(seconds: float = TRACK_SECONDS, progress: bool = True):
     for base in tqdm(("eight", "ladder", "zigzag"), desc="snake tracks", disable=not progress):
         env = SnakeEnv(base, camera=False)
         steps = max(2, int(round(seconds / env.dt)))
-        policy = lambda ps, obs, st, env=env: steering.act(params, ps, obs, env.dt)  # noqa: E731
+        policy = lambda ps, obs, st, env=env: steering.step(params, ps, obs, env.dt)  # noqa: E731
         run = jax.jit(jax.vmap(lambda m, env=env, policy=policy, steps=steps: rollout(env, policy, steering.init(),
                                                                                       steps, m)[0]))
         record = jax.device_get(run(jnp.array([False, True])))

@@ -1,7 +1,7 @@
 """A scripted, non-spiking steering controller that follows the target: the baseline the SNNs must beat.
 
 It reads the angle of the target to the body (Eq. (12) of the snake R-STDP
-paper, observation 1 of :class:`robots.snake.env.SnakeEnv`), optionally
+paper, observation 1 of `robots.snake.env.SnakeEnv`), optionally
 smooths it with a first-order low-pass filter of time constant ``tau``, and
 steers in proportion to it: ``action[0] = clip(gain * angle, -1, 1)``, a
 positive action turning right towards a target on the right. It also turns
@@ -10,8 +10,9 @@ the role of the paper's head controller (section III-B), on top of the gait's
 head compensation: the slithering swings the head from side to side, and
 pointing it at the target is what keeps the target in view.
 
-Like the SNN controllers to come it is an ``(init, act)`` pair of pure
-functions of explicit state, so it runs inside the same ``lax.scan`` as the
+Like the SNN controllers to come it is an ``(init, step)`` pair of pure
+functions of explicit state (`robots.snake.steering.init`,
+`robots.snake.steering.step`), so it runs inside the same ``lax.scan`` as the
 env and ``vmap`` batches it.
 """
 
@@ -21,6 +22,8 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+__all__ = ["SteeringParams", "SteeringState", "init", "step"]
 
 
 class SteeringParams(NamedTuple):
@@ -50,7 +53,7 @@ def init() -> SteeringState:
     return SteeringState(angle=jnp.zeros((), jnp.float32))
 
 
-def act(params: SteeringParams, state: SteeringState, obs: jax.Array, dt) -> tuple[SteeringState, jax.Array]:
+def step(params: SteeringParams, state: SteeringState, obs: jax.Array, dt) -> tuple[SteeringState, jax.Array]:
     """One control step: filter the body-to-target angle ``obs[1]`` and steer towards it.
 
     Returns the new state and the action ``(2,)``: steering and head offset, each in [-1, 1].

@@ -9,7 +9,7 @@ zigzag test track, "with a similar curvature as the training path", tested as
 drawn and mirrored. Here each track is a curve of piecewise-constant curvature
 (straight lines and circular arcs) parametrised by arc length ``s``, so that its
 points, headings and curvature are closed forms, and every turn has the same
-radius :data:`TURN_RADIUS`:
+radius `TURN_RADIUS`:
 
 * ``eight``: a straight lead-in from the spawn point to the origin, then
   forever a counter-clockwise circle above the x axis and a clockwise one
@@ -24,7 +24,7 @@ The mirror image of a track is ``(x, y) -> (x, -y)``.
 The target moves along its track "a little faster than the snake robot, but
 not further away from the snake robot than the initial distance": each control
 step it advances by ``speed * dt`` unless that would take it farther than the
-initial 1.6 m from the snake's head, in which case it waits (:func:`advance`).
+initial 1.6 m from the snake's head, in which case it waits (`advance`).
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class Track(NamedTuple):
 
 
 def from_segments(origin, heading, segments) -> Track:
-    """A :class:`Track` from ``(length, curvature)`` segments, integrated in closed form from ``origin``."""
+    """A `Track` from ``(length, curvature)`` segments, integrated in closed form from ``origin``."""
     s0, starts, headings, curvatures = [], [], [], []
     p = np.asarray(origin, float)
     th = float(heading)
@@ -123,7 +123,7 @@ def mirror(track: Track) -> Track:
 
 
 def get(name: str) -> Track:
-    """A track by name, one of :data:`TRACKS`."""
+    """A track by name, one of `TRACKS`."""
     base, _, mirrored = name.partition("-")
     builders = {"eight": eight, "ladder": ladder, "zigzag": zigzag}
     if base not in builders or mirrored not in ("", "mirror"):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
 
+__all__ = ["PlasticityRule"]
+
 
 class PlasticityRule(NamedTuple):
     """A pair of pure functions implementing a plasticity rule.

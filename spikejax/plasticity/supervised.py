@@ -9,6 +9,8 @@ import jax.numpy as jnp
 
 from spikejax.plasticity.base import PlasticityRule
 
+__all__ = ["StochasticSupervisedParams", "StochasticSupervisedState", "stochastic_supervised"]
+
 
 class StochasticSupervisedParams(NamedTuple):
     """Parameters of the stochastic supervised rule.
