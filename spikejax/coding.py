@@ -92,8 +92,7 @@ def poisson_train(rates: jax.Array, dt, n_steps: int, *, key: jax.Array) -> jax.
     if rates.ndim == 2:
         if rates.shape[0] != n_steps:
             raise UserError(
-                f"rates has shape {rates.shape}: a rate per step needs shape (n_steps, n) "
-                f"with n_steps = {n_steps}"
+                f"rates has shape {rates.shape}: a rate per step needs shape (n_steps, n) with n_steps = {n_steps}"
             )
 
         def step(carry, xs):
@@ -208,9 +207,7 @@ def decoder_init(dtype=jnp.float32) -> DecoderState:
     return DecoderState(trace=jnp.zeros((), dtype))
 
 
-def decoder_step(
-    params: DecoderParams, state: DecoderState, spikes: jax.Array, dt
-) -> tuple[DecoderState, jax.Array]:
+def decoder_step(params: DecoderParams, state: DecoderState, spikes: jax.Array, dt) -> tuple[DecoderState, jax.Array]:
     """One step of the leaky-integrator population decoder, Eq. (8) of the RoboBee paper.
 
     Eq. (8), ``y_hat(t) = alpha * sum_{t_f < t} exp(beta (t_f - t)) - gamma``, the

@@ -160,9 +160,7 @@ def lif_params(
         >>> float(p.t_ref), p.tau.dtype
         (0.0, dtype('float32'))
     """
-    return LIFParams(
-        *(jnp.asarray(x, dtype) for x in (tau, r, v_th, v_reset, v_rest, t_ref, dt, sigma))
-    )
+    return LIFParams(*(jnp.asarray(x, dtype) for x in (tau, r, v_th, v_reset, v_rest, t_ref, dt, sigma)))
 
 
 def lif_init(n: int, params: LIFParams) -> LIFState:

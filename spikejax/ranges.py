@@ -93,8 +93,13 @@ def ranges_of(cls: type) -> Mapping[str, Range]:
     return dict(getattr(cls, "__ranges__", {}))
 
 
-def check(cls: type, values: Mapping[str, Any], *, names: Mapping[str, str] | None = None,
-          scales: Mapping[str, float] | None = None) -> None:
+def check(
+    cls: type,
+    values: Mapping[str, Any],
+    *,
+    names: Mapping[str, str] | None = None,
+    scales: Mapping[str, float] | None = None,
+) -> None:
     """Raise a one-line ``UserError`` if a value lies outside its field's declared range, or is not finite.
 
     Args:

@@ -32,7 +32,9 @@ def test_every_command_of_the_readme_is_registered():
     assert {"info", "sweep", "detect.pipe", "bench.hough", "reproduce.gaits", "bench.robobee"} <= names
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["reproduce", "--help"], ["bench", "--help"], ["detect", "pipe", "--help"]])
+@pytest.mark.parametrize(
+    "argv", [["--help"], ["reproduce", "--help"], ["bench", "--help"], ["detect", "pipe", "--help"]]
+)
 def test_help_through_the_cli(argv):
     run = subprocess.run([sys.executable, "-m", "spikejax.cli", *argv], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr

@@ -10,10 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from spikejax.coding import antagonist_currents
-from spikejax.coding import poisson_spikes
-from spikejax.coding import poisson_train
-from spikejax.coding import shift_scale
+from spikejax.coding import antagonist_currents, poisson_spikes, poisson_train, shift_scale
 from spikejax.errors import UserError
 
 # Deviations larger than this many standard errors fail a statistical test.

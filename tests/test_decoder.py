@@ -9,10 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax.coding import DecoderParams
-from spikejax.coding import decoder_init
-from spikejax.coding import decoder_step
-from spikejax.coding import poisson_train
+from spikejax.coding import DecoderParams, decoder_init, decoder_step, poisson_train
 
 # Float32 trace of up to a few hundred spikes against a float64 sum.
 RTOL = 1e-5

@@ -48,9 +48,7 @@ def standing():
 def test_standing_pipe_body_and_known_size_distance(standing, mode):
     scene, events = standing
     size = 0.25  # m: the 24-pixel pipe is then at f l / w = 1.155 m
-    found = detect.detect(
-        events, (128, 128), mode=mode, slot=0.05, circles=False, track=pp.track_params(size=size)
-    )
+    found = detect.detect(events, (128, 128), mode=mode, slot=0.05, circles=False, track=pp.track_params(size=size))
     b = found.bodies
     assert b.valid.all()
     truth_pos = _slot_truth(scene.truth.pos, 100.0, 0.05, len(b.t))
@@ -81,7 +79,9 @@ def test_lying_pipe_entry_width_and_distance():
     np.testing.assert_allclose(e.width, 2 * r, atol=4.0)
     d_true = FOCAL * size / (2 * r)
     error = np.abs(found.entry_estimates.distance - d_true)
-    print(f"entry: distance {d_true.min():.3f}-{d_true.max():.3f} m, mean error {error.mean():.3f} m, max {error.max():.3f} m")
+    print(
+        f"entry: distance {d_true.min():.3f}-{d_true.max():.3f} m, mean error {error.mean():.3f} m, max {error.max():.3f} m"
+    )
     # The paper finds the entry less precise than the body; so do we (ring of 1-pixel radii).
     assert error.mean() < 0.08 * d_true.mean() and (error / d_true).max() < 0.12
 
@@ -94,7 +94,10 @@ def test_approach_distance_from_expansion():
     width = FOCAL * l / d
     centre = 64.0 + 18.0 * np.sin(2 * np.pi * 1.5 * t)  # sideways swing: opposite edge polarities
     frames = np.stack(
-        [np.asarray(scenes.standing_pipe(n_frames=2, pipe_width=w, start=c, speed=0.0).frames[0]) for w, c in zip(width, centre)]
+        [
+            np.asarray(scenes.standing_pipe(n_frames=2, pipe_width=w, start=c, speed=0.0).frames[0])
+            for w, c in zip(width, centre)
+        ]
     )
     events = _recording(frames, t)
     found = detect.detect(events, (128, 128), slot=slot, circles=False, track=pp.track_params(speed=v))
@@ -104,8 +107,10 @@ def test_approach_distance_from_expansion():
     # A slot's widths are measured over the whole slot: compare with the distance at its middle.
     d_slot = d0 - v * (found.bodies.t[known] - 0.5 * slot)
     error = np.abs(est.distance[known] - d_slot)
-    print(f"Eq. 9: {known.sum()} estimates at {d_slot.min():.2f}-{d_slot.max():.2f} m, "
-          f"mean error {error.mean():.3f} m, median {np.median(error):.3f} m")
+    print(
+        f"Eq. 9: {known.sum()} estimates at {d_slot.min():.2f}-{d_slot.max():.2f} m, "
+        f"mean error {error.mean():.3f} m, median {np.median(error):.3f} m"
+    )
     # One pixel of width error over the 10-detection interval moves Eq. 9 by 10-15 % here.
     assert np.median(error / d_slot) < 0.15 and np.mean(error / d_slot) < 0.25
 
@@ -131,8 +136,22 @@ def test_command_writes_table_csv_and_overlay(standing, tmp_path, capsys):
     events = events.copy()
     events["t"] += 1_700_000_000_000_000  # Unix microseconds, as AEDAT4 stores them
     path = io.save(tmp_path / "pipe.aedat4", events, (128, 128))
-    rc = cli.main(["detect", "pipe", str(path), "--out", str(tmp_path / "out"), "--shapes", "lines",
-                   "--slot", "0.05", "--pipe-size", "0.25", "--no-progress"])
+    rc = cli.main(
+        [
+            "detect",
+            "pipe",
+            str(path),
+            "--out",
+            str(tmp_path / "out"),
+            "--shapes",
+            "lines",
+            "--slot",
+            "0.05",
+            "--pipe-size",
+            "0.25",
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     printed = capsys.readouterr().out
     assert "6 slots of 50 ms" in printed and "body" in printed and "1.1" in printed  # distances ~1.155 m
@@ -157,7 +176,12 @@ def test_overflow_is_counted_per_slot_and_reported(standing, tmp_path, capsys):
     np.testing.assert_array_equal(found.overflow, per_part[: 5 * len(found.overflow)].reshape(-1, 5).sum(1))
     assert found.overflow.sum() > 0
     path = io.save(tmp_path / "pipe.npz", events, (128, 128))
-    assert cli.main(["detect", "pipe", str(path), "--shapes", "lines", "--slot", "0.05", "--capacity", "500", "--no-progress"]) == 0
+    assert (
+        cli.main(
+            ["detect", "pipe", str(path), "--shapes", "lines", "--slot", "0.05", "--capacity", "500", "--no-progress"]
+        )
+        == 0
+    )
     assert f"warning: {int(found.overflow.sum())} events did not fit (capacity 500 per part)" in capsys.readouterr().out
 
 
@@ -176,8 +200,12 @@ def test_async_circles_warn_that_they_are_slow(tmp_path, capsys):
     a = np.zeros(20, io.EVENT_DTYPE)
     a["x"], a["y"], a["t"], a["p"] = np.arange(20) + 40, 64, np.arange(20) * 100, 1
     np.save(tmp_path / "few.npy", a)
-    assert cli.main(["detect", "pipe", str(tmp_path / "few.npy"), "--mode", "async", "--shapes", "circles",
-                     "--no-progress"]) == 0
+    assert (
+        cli.main(
+            ["detect", "pipe", str(tmp_path / "few.npy"), "--mode", "async", "--shapes", "circles", "--no-progress"]
+        )
+        == 0
+    )
     assert "asynchronous circle detection is slow" in capsys.readouterr().err
     assert cli.main(["detect", "pipe", str(tmp_path / "few.npy"), "--shapes", "circles", "--no-progress"]) == 0
     assert "slow" not in capsys.readouterr().err
@@ -193,10 +221,32 @@ def test_the_library_module_imports_no_app_code():
 
 
 def test_format_table_and_csv(tmp_path):
-    rows = [dict(t=0.05, kind="body", theta_deg=90.0, width_px=24.0, pos_px=40.0, row_px=64.0, distance_m=1.155,
-                 offset_m=-0.1, control=-1, score=12.0),
-            dict(t=0.1, kind="entry", theta_deg=0.0, width_px=30.0, pos_px=50.0, row_px=60.0, distance_m=0.0,
-                 offset_m=0.0, control=1, score=3.0)]
+    rows = [
+        dict(
+            t=0.05,
+            kind="body",
+            theta_deg=90.0,
+            width_px=24.0,
+            pos_px=40.0,
+            row_px=64.0,
+            distance_m=1.155,
+            offset_m=-0.1,
+            control=-1,
+            score=12.0,
+        ),
+        dict(
+            t=0.1,
+            kind="entry",
+            theta_deg=0.0,
+            width_px=30.0,
+            pos_px=50.0,
+            row_px=60.0,
+            distance_m=0.0,
+            offset_m=0.0,
+            control=1,
+            score=3.0,
+        ),
+    ]
     assert detect_pipe.format_table([]) == "no pipe detected"
     assert detect_pipe.format_table(rows).splitlines() == [
         "    t (s) kind   theta  width    pos  distance  C spikes",

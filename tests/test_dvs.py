@@ -34,8 +34,9 @@ def test_frame_difference_by_hand():
 def test_contrast_step_makes_the_predicted_events(low, high, c):
     params = dvs.dvs_params(pos_threshold=c, neg_threshold=c, eps=1e-3)
     frames = _frames(low, high)
-    events, overflow = dvs.emulate(params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
-                                   key=jax.random.key(0))
+    events, overflow = dvs.emulate(
+        params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8, key=jax.random.key(0)
+    )
     contrast = np.log(high + 1e-3) - np.log(low + 1e-3)
     n = int(np.floor(abs(contrast) / c))
     assert int(events.count()[0]) == 20 * n and int(overflow[0]) == 0
@@ -50,8 +51,9 @@ def test_contrast_step_makes_the_predicted_events(low, high, c):
 def test_no_change_no_events():
     params = dvs.dvs_params(threshold_sigma=0.1)
     frames = _frames(0.4, 0.4)
-    events, overflow = dvs.emulate(params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
-                                   key=jax.random.key(1))
+    events, overflow = dvs.emulate(
+        params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8, key=jax.random.key(1)
+    )
     assert int(events.count()[0]) == 0 and int(overflow[0]) == 0
     fd, _ = dvs.difference_events(frames, jnp.asarray([0.0, 0.1]), threshold=0.01, capacity=64)
     assert int(fd.count()[0]) == 0
@@ -60,12 +62,17 @@ def test_no_change_no_events():
 def test_refractory_keeps_one_event_per_period():
     params = dvs.dvs_params(pos_threshold=0.2, neg_threshold=0.2, refractory=0.02)
     frames = _frames(0.2, 0.8)  # 6 crossings spread over 0.1 s: 0.0144 s apart
-    events, _ = dvs.emulate(params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
-                            key=jax.random.key(0))
+    events, _ = dvs.emulate(
+        params, frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8, key=jax.random.key(0)
+    )
     # Crossings at 1..6 x 0.01443 s: kept 1, 3, 5 (each >= 0.02 s after the last kept).
     assert int(events.count()[0]) == 20 * 3
     long, _ = dvs.emulate(
-        params._replace(refractory=jnp.float32(1.0)), frames, jnp.asarray([0.0, 0.1]), capacity=512, max_per_pixel=8,
+        params._replace(refractory=jnp.float32(1.0)),
+        frames,
+        jnp.asarray([0.0, 0.1]),
+        capacity=512,
+        max_per_pixel=8,
         key=jax.random.key(0),
     )
     assert int(long.count()[0]) == 20
@@ -73,8 +80,9 @@ def test_refractory_keeps_one_event_per_period():
 
 def test_too_many_crossings_are_counted():
     params = dvs.dvs_params(pos_threshold=0.2, neg_threshold=0.2)
-    events, overflow = dvs.emulate(params, _frames(0.2, 0.8), jnp.asarray([0.0, 0.1]), capacity=50, max_per_pixel=4,
-                                   key=jax.random.key(0))
+    events, overflow = dvs.emulate(
+        params, _frames(0.2, 0.8), jnp.asarray([0.0, 0.1]), capacity=50, max_per_pixel=4, key=jax.random.key(0)
+    )
     # 6 crossings per pixel, 4 made (2 counted), 80 made of which 50 fit.
     assert int(events.count()[0]) == 50 and int(overflow[0]) == 20 * 2 + 30
 

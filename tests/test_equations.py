@@ -63,8 +63,25 @@ REFERENCE = re.compile(
     r"\b(?:(?P<eq>Eqs?\.|Equations?)\s*(?P<eqs>\(?\d+\)?(?:\s*(?:-|,|and)\s*\(?\d+\)?)*)"
     r"|(?P<alg>Alg(?:s?\.|orithms?))\s*(?P<algs>\d+(?:\s*(?:-|,|and)\s*\d+)*))"
 )
-ABBREVIATIONS = ("Eqs.", "Eq.", "Algs.", "Alg.", "Secs.", "Sec.", "Figs.", "Fig.", "e.g.", "i.e.", "et al.", "cf.",
-                 "vs.", "ref.", "Ref.", "resp.", "approx.")
+ABBREVIATIONS = (
+    "Eqs.",
+    "Eq.",
+    "Algs.",
+    "Alg.",
+    "Secs.",
+    "Sec.",
+    "Figs.",
+    "Fig.",
+    "e.g.",
+    "i.e.",
+    "et al.",
+    "cf.",
+    "vs.",
+    "ref.",
+    "Ref.",
+    "resp.",
+    "approx.",
+)
 _SENTENCE_END = re.compile(r"[.!?](?=\s)|\n\s*\n|\n(?=\s*(?:[-*]|\d+[.)])\s)")
 _HOME = re.compile(r"`([A-Za-z_][\w.]*(?::[\w.]+)?)`")
 _TEST = re.compile(r"`(tests/[\w/]+\.py)::(\w+)`")
@@ -204,7 +221,7 @@ def _mask(text: str) -> str:
 def _sentence(text: str, masked: str, offset: int) -> str:
     starts = [m.end() for m in _SENTENCE_END.finditer(masked) if m.end() <= offset]
     ends = [m.start() for m in _SENTENCE_END.finditer(masked) if m.start() >= offset]
-    return text[(starts[-1] if starts else 0):(ends[0] + 1 if ends else len(text))]
+    return text[(starts[-1] if starts else 0) : (ends[0] + 1 if ends else len(text))]
 
 
 def _numbers(match: re.Match) -> set[tuple[str, int]]:
@@ -261,7 +278,7 @@ def test_the_rule_by_hand():
     other += 'which uses Eq. (3) of the pipe-tracking paper."""\n'
     assert [line for line, _ in bare_references(other)] == [7]
     none = '"""No paper here."""\n# Eq. (2) of the pipe-tracking paper, and\n'
-    none += '# Eq. (3): one comment block, one paper.\nx = 1  # Alg. 1\n'
+    none += "# Eq. (3): one comment block, one paper.\nx = 1  # Alg. 1\n"
     assert [line for line, _ in bare_references(none)] == [4]
     two = '"""Gait and camera.\n\nSee Eq. (5), e.g. Sec. 2.4 and Fig. 3 of the pipe-tracking paper. Then Eq. 6.\n\n'
     two += '- Eq. (1) of the snake R-STDP\n  paper.\n- Eq. (12)\n"""\n'
@@ -271,11 +288,16 @@ def test_the_rule_by_hand():
 def test_reference_numbers():
     source = '"""Eqs. (4)-(6) and Eq. (1), (9) of the pipe-tracking paper; Alg. 3, line 11 of the RoboBee paper."""'
     got = {(paper, frozenset(numbers)) for _, _, paper, numbers in references(source)}
-    assert got == {(None, frozenset({("Eq", 4), ("Eq", 5), ("Eq", 6)})), (None, frozenset({("Eq", 1), ("Eq", 9)})),
-                   (None, frozenset({("Alg", 3)}))}
+    assert got == {
+        (None, frozenset({("Eq", 4), ("Eq", 5), ("Eq", 6)})),
+        (None, frozenset({("Eq", 1), ("Eq", 9)})),
+        (None, frozenset({("Alg", 3)})),
+    }
     source = '"""Eq. 7 of the snake R-STDP paper, then Algorithm 2."""'
     assert [(paper, numbers) for _, _, paper, numbers in references(source)] == [
-        ("snake R-STDP", {("Eq", 7)}), ("snake R-STDP", {("Alg", 2)})]
+        ("snake R-STDP", {("Eq", 7)}),
+        ("snake R-STDP", {("Alg", 2)}),
+    ]
 
 
 def test_every_equation_reference_names_its_paper():

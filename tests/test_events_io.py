@@ -50,7 +50,9 @@ def test_structured_round_trip_restores_stamps_exactly():
 
 def test_slots_of_a_stream_read_row_by_row():
     a = _tonic(200)
-    rows = [io.from_structured(a[k * 50:(k + 1) * 50], (128, 96), capacity=64, t0=int(a["t"][0]))[0] for k in range(4)]
+    rows = [
+        io.from_structured(a[k * 50 : (k + 1) * 50], (128, 96), capacity=64, t0=int(a["t"][0]))[0] for k in range(4)
+    ]
     slots = jax.tree.map(lambda *v: jnp.stack(v), *rows)  # leaves (4, 64), the last 14 slots of each row empty
     back = io.to_structured(slots, t0=int(a["t"][0]), polarity="bool")
     for name in ("x", "y", "t", "p"):

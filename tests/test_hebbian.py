@@ -9,8 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from spikejax.plasticity import RewardHebbianParams
-from spikejax.plasticity import reward_modulated_hebbian
+from spikejax.plasticity import RewardHebbianParams, reward_modulated_hebbian
 
 RULE = reward_modulated_hebbian()
 # Float32 against float64 over a few dozen multiply-adds of order-one numbers.

@@ -5,13 +5,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from spikejax import DiscreteLIFParams
-from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
 from robots.hexapod import gaits
 from robots.hexapod.cpg import CPGWeights, run_gait
 from robots.hexapod.reference import reference_gait_correct, reference_train
 from robots.hexapod.training import TrainParams, gait_correct, train
 from robots.hexapod.trial import GaitTrialParams, convergence_trial
+from spikejax import DiscreteLIFParams
+from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
 
 
 def test_patterns_are_the_papers():
@@ -49,7 +49,9 @@ def test_rule_moves_only_erring_neurons_from_active_synapses():
     post = jnp.array([1.0, 0.0, 1.0, 0.0])
     target = jnp.array([0.0, 1.0, 1.0, 0.0])  # redundant, missing, correct, correct
     noise = jnp.array([0.5, 0.25, 0.9, 0.1])
-    dw, _ = rule.update(StochasticSupervisedParams(lr=2.0), rule.init(None), jnp.zeros((3, 4)), pre, post, target, noise)
+    dw, _ = rule.update(
+        StochasticSupervisedParams(lr=2.0), rule.init(None), jnp.zeros((3, 4)), pre, post, target, noise
+    )
     expected = np.zeros((3, 4))
     expected[[0, 2], 0] = -2.0 * 0.5  # redundant spike: active synapses weakened
     expected[[0, 2], 1] = +2.0 * 0.25  # missing spike: active synapses strengthened
@@ -127,8 +129,8 @@ def test_one_gait_converges_almost_always():
 
 
 def test_replay_is_the_tables_trial():
-    from spikejax.sweep import trial_key
     from robots.hexapod.trial import replay_trial
+    from spikejax.sweep import trial_key
 
     params = GaitTrialParams(n_gaits=3)
     row = jax.jit(convergence_trial)(params, trial_key(0, 5))

@@ -220,7 +220,9 @@ def test_modes_vmap_over_streams_like_single_streams():
     for i in range(3):
         one = jax.tree.map(lambda a: a[i], batch)
         np.testing.assert_array_equal(np.asarray(together[i]), np.asarray(hough.async_run(params, grid, one)[1]))
-        np.testing.assert_array_equal(np.asarray(together_sync[i]), np.asarray(hough.sync_run(params, grid, one, times)[1]))
+        np.testing.assert_array_equal(
+            np.asarray(together_sync[i]), np.asarray(hough.sync_run(params, grid, one, times)[1])
+        )
 
 
 def test_async_nested_vmap_and_batched_params_like_single_streams():
@@ -268,11 +270,19 @@ SMALL = 32  # a 32 x 32 sensor keeps the per-event reference loops short
 def _scene_events(kind, variant=0):
     """Event frames ``(5, 256)`` and the frame times of a small synthetic scene."""
     if kind == "line":
-        scene = scenes.standing_pipe(n_frames=6, height=SMALL, width=SMALL, pipe_width=8.0, start=10.0 + 2 * variant,
-                                     speed=2.0, tilt=0.2 - 0.1 * variant)
+        scene = scenes.standing_pipe(
+            n_frames=6,
+            height=SMALL,
+            width=SMALL,
+            pipe_width=8.0,
+            start=10.0 + 2 * variant,
+            speed=2.0,
+            tilt=0.2 - 0.1 * variant,
+        )
     else:
-        scene = scenes.lying_pipe(n_frames=6, height=SMALL, width=SMALL, centre=(14.0 + variant, 16.0), radius=6.0,
-                                  speed=1.0, growth=1.0)
+        scene = scenes.lying_pipe(
+            n_frames=6, height=SMALL, width=SMALL, centre=(14.0 + variant, 16.0), radius=6.0, speed=1.0, growth=1.0
+        )
     events, overflow = dvs.difference_events(scene.frames, scene.times, threshold=0.1, capacity=256)
     assert int(overflow.sum()) == 0 and int(events.count().min()) > 50
     return events, scene.times[1:]

@@ -10,15 +10,17 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from spikejax.neurons import DiscreteLIFParams
-from spikejax.neurons import discrete_lif_init
-from spikejax.neurons import discrete_lif_step
-from spikejax.neurons import LIFState
-from spikejax.neurons import lif_first_spike_time
-from spikejax.neurons import lif_init
-from spikejax.neurons import lif_params
-from spikejax.neurons import lif_rate
-from spikejax.neurons import lif_step
+from spikejax.neurons import (
+    DiscreteLIFParams,
+    LIFState,
+    discrete_lif_init,
+    discrete_lif_step,
+    lif_first_spike_time,
+    lif_init,
+    lif_params,
+    lif_rate,
+    lif_step,
+)
 
 # Float32 rounding of times and potentials; far below one step (1e-4 s, ~1e-2 V per step).
 FLOAT_SLACK = 1e-6
@@ -272,9 +274,7 @@ def test_lif_vmap_equals_loop():
     n, n_steps = 3, 400
     currents = jnp.linspace(0.9, 4.0, 4 * n).reshape(4, n)
     keys = jax.random.split(jax.random.key(5), 4)
-    swept = p._replace(
-        tau=jnp.array([10e-3, 20e-3, 30e-3, 40e-3]), t_ref=jnp.array([0.0, 1e-3, 2e-3, 3e-3])
-    )
+    swept = p._replace(tau=jnp.array([10e-3, 20e-3, 30e-3, 40e-3]), t_ref=jnp.array([0.0, 1e-3, 2e-3, 3e-3]))
     run = lambda params, i, k: simulate(params, lif_init(n, params), i, n_steps, k)[1:]
     in_axes_p = type(p)(0, None, None, None, None, 0, None, None)
     v_batch, sp_batch = jax.vmap(run, in_axes=(in_axes_p, 0, 0))(swept, currents, keys)

@@ -1,6 +1,5 @@
 """The notebooks run from top to bottom on a small size."""
 
-import os
 from pathlib import Path
 
 import pytest
@@ -15,7 +14,9 @@ def test_gaits_notebook_executes(tmp_path, monkeypatch):
     monkeypatch.setenv("SPIKEJAX_RESULTS", str(tmp_path / "gaits"))
     monkeypatch.setenv("SPIKEJAX_NB_TRIALS", "40")
     nb = nbformat.read(NOTEBOOKS / "gaits.ipynb", as_version=4)
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+    nbclient.NotebookClient(
+        nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+    ).execute()
     outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.get("outputs", [])]
     assert not [o for o in outputs if o.output_type == "error"]
     assert sum(o.output_type == "display_data" for o in outputs) >= 3  # rasters, weights, errors
@@ -25,7 +26,9 @@ def test_gaits_notebook_executes(tmp_path, monkeypatch):
 def test_robobee_notebook_executes(monkeypatch):
     monkeypatch.setenv("SPIKEJAX_NB_FLIGHTS", "4")
     nb = nbformat.read(NOTEBOOKS / "robobee.ipynb", as_version=4)
-    nbclient.NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+    nbclient.NotebookClient(
+        nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+    ).execute()
     outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.get("outputs", [])]
     assert not [o for o in outputs if o.output_type == "error"]
     assert sum(o.output_type == "display_data" for o in outputs) >= 2

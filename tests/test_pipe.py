@@ -137,7 +137,16 @@ def _approach(n, v=0.05, d0=3.0, dt=0.5, l=0.2):
 def test_track_with_unknown_size_uses_the_detection_ten_valid_ones_earlier():
     t, d, width = _approach(30)
     valid = jnp.ones(30, bool).at[jnp.array([3, 12, 13])].set(False)
-    pipes = pp.Pipe(t, jnp.full(30, math.pi / 2), width, jnp.full(30, 64.0), jnp.full(30, 64.0), jnp.zeros(30, jnp.int32), jnp.ones(30), valid)
+    pipes = pp.Pipe(
+        t,
+        jnp.full(30, math.pi / 2),
+        width,
+        jnp.full(30, 64.0),
+        jnp.full(30, 64.0),
+        jnp.zeros(30, jnp.int32),
+        jnp.ones(30),
+        valid,
+    )
     params = pp.track_params(fov=math.radians(60.0), speed=0.05)
     est = jax.jit(pp.track)(params, pipes)
     rank = np.cumsum(np.asarray(valid)) - 1  # index among valid detections
@@ -151,7 +160,16 @@ def test_track_with_known_size_and_pipe_offset_from_projection():
     t, d, _ = _approach(5)
     width = FOCAL * 0.2 / d
     pos = 64.0 + FOCAL * 0.3 / d
-    pipes = pp.Pipe(t, jnp.full(5, math.pi / 2), width, pos, jnp.full(5, 64.0), jnp.zeros(5, jnp.int32), jnp.ones(5), jnp.ones(5, bool))
+    pipes = pp.Pipe(
+        t,
+        jnp.full(5, math.pi / 2),
+        width,
+        pos,
+        jnp.full(5, 64.0),
+        jnp.zeros(5, jnp.int32),
+        jnp.ones(5),
+        jnp.ones(5, bool),
+    )
     est = pp.track(pp.track_params(size=0.2), pipes)
     np.testing.assert_allclose(est.distance, d, rtol=1e-5)
     np.testing.assert_allclose(est.pipe_offset, 0.3, rtol=1e-5)
@@ -173,7 +191,9 @@ def test_eq4_to_6_camera_offset_is_the_phase_shifted_swing():
 
 def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
     params = pp.track_params(size=0.2, swing_amplitude=0.1, swing_ratio=1.0, swing_phase=0.0)
-    pipe = pp.Pipe(*(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True))
+    pipe = pp.Pipe(
+        *(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True)
+    )
     # Camera swung to the left of the central line (negative offset): the pipe straight
     # ahead of the camera is left of the central line too.
     _, est = pp.track_step(params, pp.track_init(), pipe, -0.5, 0.0)

@@ -41,8 +41,10 @@ def test_keys_give_independent_streams():
     np.testing.assert_array_equal(a, _draws(2))
     assert abs(np.corrcoef(a, b)[0, 1]) < 4 / np.sqrt(N)
     # Neighbouring keys of a fold_in sequence (how trials are keyed) are unrelated as well.
-    c = np.asarray(hash_uniform(hash_seed(key=jax.random.fold_in(jax.random.key(0), 1)),
-                                 jnp.arange(N, dtype=jnp.uint32)))
-    d = np.asarray(hash_uniform(hash_seed(key=jax.random.fold_in(jax.random.key(0), 2)),
-                                 jnp.arange(N, dtype=jnp.uint32)))
+    c = np.asarray(
+        hash_uniform(hash_seed(key=jax.random.fold_in(jax.random.key(0), 1)), jnp.arange(N, dtype=jnp.uint32))
+    )
+    d = np.asarray(
+        hash_uniform(hash_seed(key=jax.random.fold_in(jax.random.key(0), 2)), jnp.arange(N, dtype=jnp.uint32))
+    )
     assert abs(np.corrcoef(c, d)[0, 1]) < 4 / np.sqrt(N)

@@ -9,8 +9,12 @@ from spikejax.errors import UserError
 from spikejax.ranges import NON_NEGATIVE, POSITIVE, Range, check, ranged, ranges_of
 
 
-@ranged(tau=POSITIVE, rate=NON_NEGATIVE, fov=Range(0, math.pi, low_open=True, high_open=True),
-        n_gaits=Range(1, 3, integer=True))
+@ranged(
+    tau=POSITIVE,
+    rate=NON_NEGATIVE,
+    fov=Range(0, math.pi, low_open=True, high_open=True),
+    n_gaits=Range(1, 3, integer=True),
+)
 class _Params(NamedTuple):
     tau: float = 0.02
     rate: float = 0.0

@@ -95,19 +95,27 @@ def test_ray_distances_match_mujoco_mj_ray():
         render.spheres([2.0, 0.5, 0.4], 0.3, 0.1),
         render.concat_cylinders(
             render.standing_cylinder(3.0, -1.0, 0.25, 1.2),
-            render.Cylinders(jnp.array([[4.0, 1.5, 0.4]]), jnp.asarray(pipe_axis[None], jnp.float32),
-                             jnp.array([0.3]), jnp.array([1.0]), jnp.array([0.1]), jnp.array([0.05])),
+            render.Cylinders(
+                jnp.array([[4.0, 1.5, 0.4]]),
+                jnp.asarray(pipe_axis[None], jnp.float32),
+                jnp.array([0.3]),
+                jnp.array([1.0]),
+                jnp.array([0.1]),
+                jnp.array([0.05]),
+            ),
         ),
     )
     origin = np.array([0.0, 0.0, 0.45])
     rng = np.random.default_rng(0)
     # Rays aimed at random points on the three bodies and the ground (mj_ray caps cylinders; aim at their walls).
-    targets = np.concatenate([
-        [2.0, 0.5, 0.4] + rng.uniform(-0.2, 0.2, (20, 3)),
-        [3.0, -1.0, 0.6] + rng.uniform(-0.2, 0.2, (20, 3)) * [1, 1, 2.5],
-        [4.0, 1.5, 0.4] + np.outer(rng.uniform(-0.6, 0.6, 20), pipe_axis) + rng.uniform(-0.1, 0.1, (20, 3)),
-        rng.uniform([1, -3, -0.5], [8, 3, 0.0], (20, 3)),
-    ])
+    targets = np.concatenate(
+        [
+            [2.0, 0.5, 0.4] + rng.uniform(-0.2, 0.2, (20, 3)),
+            [3.0, -1.0, 0.6] + rng.uniform(-0.2, 0.2, (20, 3)) * [1, 1, 2.5],
+            [4.0, 1.5, 0.4] + np.outer(rng.uniform(-0.6, 0.6, 20), pipe_axis) + rng.uniform(-0.1, 0.1, (20, 3)),
+            rng.uniform([1, -3, -0.5], [8, 3, 0.0], (20, 3)),
+        ]
+    )
     dirs = targets - origin
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     t, _ = render.intersect(scene, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))

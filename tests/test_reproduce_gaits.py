@@ -4,12 +4,10 @@ import csv
 import subprocess
 import sys
 
-import numpy as np
-
-from spikejax.stats import wilson_interval
-from spikejax.sweep import read_results
 from robots.hexapod.bench import bench_numpy, bench_spikejax
 from robots.hexapod.trial import GaitTrialParams
+from spikejax.stats import wilson_interval
+from spikejax.sweep import read_results
 
 
 def _cli(*args):

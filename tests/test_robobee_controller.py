@@ -9,10 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from robots.robobee.controller import ControllerConfig
-from robots.robobee.controller import controller_init
-from robots.robobee.controller import controller_params
-from robots.robobee.controller import controller_step
+from robots.robobee.controller import ControllerConfig, controller_init, controller_params, controller_step
 from spikejax.errors import UserError
 
 CONFIG = ControllerConfig()
@@ -99,9 +96,7 @@ def test_vmap_over_seeds_equals_loop_over_seeds():
     y = -(q @ K)
     learn = jnp.ones(n_steps, bool)
     keys = jax.random.split(jax.random.key(3), 3)
-    batched, b_state = jax.vmap(simulate, in_axes=(None, None, 0, None, None, None))(
-        CONFIG, p, keys, q, y, learn
-    )
+    batched, b_state = jax.vmap(simulate, in_axes=(None, None, 0, None, None, None))(CONFIG, p, keys, q, y, learn)
     for i in range(len(keys)):
         looped, l_state = simulate(CONFIG, p, keys[i], q, y, learn)
         np.testing.assert_allclose(batched[i], looped, rtol=1e-5, atol=1e-6)

@@ -15,8 +15,18 @@ def test_lqr_flight_reaches_both_waypoints_and_holds_q0():
     K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
     plan = flight_plan("waypoints")
     rec = jax.jit(
-        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_params(), plan, False,
-                        hold_steps=2000, segment_steps=10000, key=key)
+        lambda key: fly(
+            ControllerConfig(),
+            controller_params(),
+            robot,
+            K,
+            altitude_params(),
+            plan,
+            False,
+            hold_steps=2000,
+            segment_steps=10000,
+            key=key,
+        )
     )(jax.random.key(0))
     t, q = np.asarray(rec.t), np.asarray(rec.q)
     # The hold keeps the state at q0 exactly (Sec. V: the first 500 ms in the paper).
@@ -35,10 +45,22 @@ def test_snn_flight_learning_online_reaches_both_waypoints():
     robot = robobee_params()
     K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
     plan = flight_plan("waypoints")
-    run = jax.jit(jax.vmap(
-        lambda key: fly(ControllerConfig(), controller_params(), robot, K, altitude_params(), plan, True,
-                        hold_steps=5000, segment_steps=10000, key=key)
-    ))
+    run = jax.jit(
+        jax.vmap(
+            lambda key: fly(
+                ControllerConfig(),
+                controller_params(),
+                robot,
+                K,
+                altitude_params(),
+                plan,
+                True,
+                hold_steps=5000,
+                segment_steps=10000,
+                key=key,
+            )
+        )
+    )
     rec = run(jax.vmap(jax.random.key)(jnp.arange(3)))
     t, q = np.asarray(rec.t[0]), np.asarray(rec.q)
     for end, target in ((1.5, plan.waypoints[0]), (2.5, plan.waypoints[1])):

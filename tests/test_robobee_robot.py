@@ -233,9 +233,7 @@ def test_floor_stops_a_falling_robot():
     """Without lift the robot falls from 2 cm, lands at z = 0 and stays there."""
     p = robobee_params()
     q0 = jnp.array([0.0, 0.0, 0.0, 0.02, 0.0, 0.0])
-    qs = np.asarray(
-        _rollout(_with_timestep(DT), p, q0, jnp.zeros((N_OPEN,)), jnp.zeros((N_OPEN,)))
-    )
+    qs = np.asarray(_rollout(_with_timestep(DT), p, q0, jnp.zeros((N_OPEN,)), jnp.zeros((N_OPEN,))))
     assert qs[:, 3].min() == 0.0 and qs[-1, 3] == 0.0 and qs[-1, 5] == 0.0
     # Free fall until the floor (at sqrt(2 z0 / g) = 64 ms), by semi-implicit Euler:
     # z_k = z0 - g dt^2 k (k + 1) / 2, i.e. z0 - g t^2 / 2 to O(dt).

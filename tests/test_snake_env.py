@@ -13,8 +13,7 @@ from robots.snake import camera as cam
 from robots.snake import tracks
 from robots.snake.env import SnakeEnv
 from spikejax.errors import UserError
-from spikejax.vision import dvs
-from spikejax.vision import render
+from spikejax.vision import dvs, render
 
 
 @pytest.fixture(scope="module")
@@ -60,8 +59,9 @@ def test_target_starts_straight_ahead(env):
     assert np.linalg.norm(target - head[:2]) == pytest.approx(tracks.SPAWN_DISTANCE, abs=1e-5)
     np.testing.assert_allclose(state.obs[:2], 0.0, atol=1e-5)  # a_head = a_body = 0 (Eq. 12)
     # ... and the camera sees it in the middle column of its first frame.
-    col, row = render.project(cam.HEAD_CAMERA, head, state.pipeline_state.head_mat,
-                         jnp.array([*target, tracks.TARGET_RADIUS]))
+    col, row = render.project(
+        cam.HEAD_CAMERA, head, state.pipeline_state.head_mat, jnp.array([*target, tracks.TARGET_RADIUS])
+    )
     assert col == pytest.approx(64.0, abs=0.5) and row < 64.0  # centre above the camera's height
     dark = np.asarray(state.info["frame"]) < 0.2
     cols = np.nonzero(dark.any(axis=0))[0]

@@ -7,11 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from robots.snake.gait import JOINT_LIMIT
-from robots.snake.gait import gait_params
-from robots.snake.gait import gait_period
-from robots.snake.gait import head_compensation
-from robots.snake.gait import joint_targets
+from robots.snake.gait import JOINT_LIMIT, gait_params, gait_period, head_compensation, joint_targets
 from robots.snake.physics import make_physics
 from spikejax.vision.pipe import camera_offset
 
@@ -106,7 +102,7 @@ def runs():
 
 
 def _per_period(x, per):
-    return x[:, :(x.shape[1] // per) * per].reshape(x.shape[0], -1, per, *x.shape[2:])
+    return x[:, : (x.shape[1] // per) * per].reshape(x.shape[0], -1, per, *x.shape[2:])
 
 
 def test_straight_gait_moves_forward_steadily(runs):

@@ -12,16 +12,28 @@ from spikejax import cli
 def test_reproduce_snake_gait_writes_its_tables_and_figures(tmp_path, monkeypatch):
     monkeypatch.setenv("SPIKEJAX_SNAKE_SCALE", "0.05")
     assert cli.main(["reproduce", "snake-gait", "--out", str(tmp_path), "--no-progress"]) == 0
-    for name in ("snake_gait.csv", "snake_tracking.csv", "snake_trajectories.png", "snake_events.png",
-                 "snake_tracking.png", "snake.gif"):
+    for name in (
+        "snake_gait.csv",
+        "snake_tracking.csv",
+        "snake_trajectories.png",
+        "snake_events.png",
+        "snake_tracking.png",
+        "snake.gif",
+    ):
         assert (tmp_path / name).stat().st_size > 0, name
     gait = list(csv.DictReader(open(tmp_path / "snake_gait.csv")))
     assert [float(r["C_o_rad"]) for r in gait] == list(reproduce.STEERS) + [0.0]
     straight = next(r for r in gait if float(r["C_o_rad"]) == 0.0 and r["compensation"] == "1")
     assert float(straight["forward_speed_m_s"]) > 0.05
     tracking = list(csv.DictReader(open(tmp_path / "snake_tracking.csv")))
-    assert [r["track"] for r in tracking] == ["eight", "eight-mirror", "ladder", "ladder-mirror", "zigzag",
-                                             "zigzag-mirror"]
+    assert [r["track"] for r in tracking] == [
+        "eight",
+        "eight-mirror",
+        "ladder",
+        "ladder-mirror",
+        "zigzag",
+        "zigzag-mirror",
+    ]
 
 
 def test_gait_rows_by_hand():

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from spikejax.stats import wilson_interval
 from spikejax.errors import UserError
+from spikejax.stats import wilson_interval
 
 
 def test_wilson_hand_computed():

@@ -256,8 +256,14 @@ def test_chunks_split_over_two_cpu_devices_give_the_same_table(tmp_path):
     """``--cpu-devices 2``: chunks of 3 trials are padded to 4 and split in two; the table is unchanged."""
     path = _write(tmp_path, TOY)
     out = tmp_path / "out"
-    run = subprocess.run(_cli_command(path, out, "--chunk-size", "3", "--cpu-devices", "2", "--no-progress"),
-                         cwd=tmp_path, env=_cli_env(), capture_output=True, text=True, timeout=300)
+    run = subprocess.run(
+        _cli_command(path, out, "--chunk-size", "3", "--cpu-devices", "2", "--no-progress"),
+        cwd=tmp_path,
+        env=_cli_env(),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr
     assert (out / "results.csv").read_bytes() == _run(path, tmp_path / "one_device", chunk_size=3)
     assert _metadata(out)["runs"][-1]["devices"] == 2
@@ -274,7 +280,8 @@ def test_a_table_is_resumed_on_as_many_devices_as_it_was_started(tmp_path, capsy
     next(iter((out / "parts").glob("rows-*.csv"))).unlink()
     assert cli.main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
     assert "computed on 2 device(s) and JAX presents 1: resume it where JAX presents 2 (on a CPU: --cpu-devices 2)" in (
-        capsys.readouterr().err)
+        capsys.readouterr().err
+    )
 
 
 def test_resume_fills_holes_with_another_chunk_size(tmp_path):
@@ -478,7 +485,9 @@ def test_trial_rejecting_a_fixed_value_is_a_one_line_error(tmp_path):
     )
     run = subprocess.run(
         [sys.executable, "-m", "spikejax.cli", "sweep", str(path), "--out", str(tmp_path / "out")],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert run.returncode == 2
     assert "Traceback" not in run.stderr and run.stderr.count("\n") == 1

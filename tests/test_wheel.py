@@ -23,8 +23,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SWEEPS = sorted(p.name for p in (ROOT / "sweeps").glob("*.toml"))
 # What a build writes into its source tree, and what a build does not need.
-NOT_COPIED = shutil.ignore_patterns(".git", ".venv", "build", "dist", "*.egg-info", "results", "__pycache__",
-                                   ".pytest_cache", ".ipynb_checkpoints")
+NOT_COPIED = shutil.ignore_patterns(
+    ".git", ".venv", "build", "dist", "*.egg-info", "results", "__pycache__", ".pytest_cache", ".ipynb_checkpoints"
+)
 
 
 def _can_build_without_isolation() -> bool:
@@ -81,19 +82,30 @@ def test_installed_wheel_reproduces_gaits_outside_the_source_tree(wheel, tmp_pat
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     work = tmp_path / "elsewhere"
     work.mkdir()
-    where = _run([python, "-c", "import importlib.metadata as m, robots, robots.common, spikejax; "
-                  "print(spikejax.__file__); print(robots.__file__); print(robots.common.SWEEPS); "
-                  "print(m.distribution('spikejax').locate_file(''))"], cwd=work, env=env).stdout.split()
+    where = _run(
+        [
+            python,
+            "-c",
+            "import importlib.metadata as m, robots, robots.common, spikejax; "
+            "print(spikejax.__file__); print(robots.__file__); print(robots.common.SWEEPS); "
+            "print(m.distribution('spikejax').locate_file(''))",
+        ],
+        cwd=work,
+        env=env,
+    ).stdout.split()
     for path in map(Path, where):
         assert path.resolve().is_relative_to(venv.resolve()), where
         assert not path.resolve().is_relative_to(ROOT), where
 
     out = work / "gaits"
-    run = _run([venv / "bin" / "spikejax", "reproduce", "gaits", "--out", out, "--trials", "5", "--no-progress"],
-               cwd=work, env=env)
+    run = _run(
+        [venv / "bin" / "spikejax", "reproduce", "gaits", "--out", out, "--trials", "5", "--no-progress"],
+        cwd=work,
+        env=env,
+    )
     lines = run.stdout.splitlines()
     head = next(i for i, line in enumerate(lines) if line.split()[:4] == ["gaits", "interleaved", "blocked", "paper"])
-    assert [line.split()[0] for line in lines[head + 1:head + 4]] == ["1", "2", "3"]
+    assert [line.split()[0] for line in lines[head + 1 : head + 4]] == ["1", "2", "3"]
     assert lines[head + 4].startswith("within a shared budget of 150 presentations: 1 gait(s)")
     with open(out / "gait_convergence.csv") as file:
         rows = list(csv.DictReader(file))

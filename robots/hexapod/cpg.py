@@ -18,8 +18,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from spikejax import DiscreteLIFParams, DiscreteLIFState, discrete_lif_init, discrete_lif_step
 from robots.hexapod.gaits import N_GAITS, N_LEGS
+from spikejax import DiscreteLIFParams, DiscreteLIFState, discrete_lif_init, discrete_lif_step
 
 __all__ = ["RECURRENT_MASK", "CPGState", "CPGWeights", "cpg_init", "cpg_step", "cpg_weights_init", "run_gait"]
 
@@ -78,9 +78,7 @@ def cpg_step(
     return CPGState(neurons=neurons, spikes=spikes), spikes
 
 
-def run_gait(
-    neuron: DiscreteLIFParams, weights: CPGWeights, gait: jax.Array, n_steps: int
-) -> jax.Array:
+def run_gait(neuron: DiscreteLIFParams, weights: CPGWeights, gait: jax.Array, n_steps: int) -> jax.Array:
     """The CPG raster, shape (n_steps, 6), when gait ``gait`` (0-based) is switched on from rest."""
     gait_spikes = jax.nn.one_hot(gait, N_GAITS, dtype=jnp.float32)
 

@@ -12,9 +12,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax.random import hash_seed
 from robots.hexapod import gaits
 from robots.hexapod.training import TrainParams, _epoch_noise
+from spikejax.random import hash_seed
 
 
 def reference_train(p: TrainParams, key: jax.Array, train_cycles: int = 2, max_epochs: int = 200):

@@ -25,10 +25,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from robots.common import run_named_sweep, sweep_file, write_csv
 from spikejax.commands import Command, add_common
 from spikejax.stats import wilson_interval
-from robots.common import run_named_sweep, sweep_file, write_csv
-
 
 # Fig. 4 and Sec. III-C: "> 80 %" for one and two gaits, "~ 20 %" for three (100 trials each).
 PAPER = {1: (0.80, ">"), 2: (0.80, ">"), 3: (0.20, "~")}
@@ -88,8 +87,15 @@ def _plot_gaits(path: Path, ours: list[list], blocked: list[list], budget: list[
         err = np.array([[r[3] - r[4] for r in rows], [r[5] - r[3] for r in rows]])
         ax.bar(x + offset, 100 * frac, width, yerr=100 * err, capsize=3, color=color, label=f"{label}, n={rows[0][1]}")
     paper = [PAPER[int(r[0])] for r in ours]
-    ax.bar(x + width, [100 * p for p, _ in paper], width, color="0.8", hatch="//", edgecolor="0.4",
-           label="paper, Fig. 4 (n=100)")
+    ax.bar(
+        x + width,
+        [100 * p for p, _ in paper],
+        width,
+        color="0.8",
+        hatch="//",
+        edgecolor="0.4",
+        label="paper, Fig. 4 (n=100)",
+    )
     for xi, (p, rel) in zip(x, paper):
         ax.text(xi + width, 100 * p + 2, f"{rel}{100 * p:.0f}", ha="center", fontsize=8)
     ax.set_xticks(x, ["G1", "G1+G2", "G1+G2+G3"])
@@ -101,8 +107,13 @@ def _plot_gaits(path: Path, ours: list[list], blocked: list[list], budget: list[
     colors = {1: "tab:green", 2: "tab:purple", 3: "tab:red"}
     for n_gaits in sorted({r[0] for r in budget}):
         rows = [r for r in budget if r[0] == n_gaits]
-        bx.plot([r[1] for r in rows], [100 * r[4] for r in rows], "o-", color=colors[n_gaits],
-                label=f"{n_gaits} gait{'s' if n_gaits > 1 else ''}")
+        bx.plot(
+            [r[1] for r in rows],
+            [100 * r[4] for r in rows],
+            "o-",
+            color=colors[n_gaits],
+            label=f"{n_gaits} gait{'s' if n_gaits > 1 else ''}",
+        )
         bx.axhline(100 * PAPER[n_gaits][0], color=colors[n_gaits], ls="--", lw=0.8)
     bx.axvline(PAPER_LIKE_BUDGET, color="0.5", lw=0.8, ls=":")
     bx.set_xscale("log")
@@ -120,8 +131,9 @@ def _add_arguments(parser) -> None:
     add_common(parser, trials="seeds per condition (default: the sweep file's)", chunk_size=True)
 
 
-def run_gaits(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
-              no_progress: bool = False) -> int:
+def run_gaits(
+    *, out: str | Path, trials: int | None = None, chunk_size: int | None = None, no_progress: bool = False
+) -> int:
     """``spikejax reproduce gaits --out DIR [--trials N]``: the files of the module docstring, and a table.
 
     Args:
@@ -148,8 +160,10 @@ def run_gaits(*, out: str | Path, trials: int | None = None, chunk_size: int | N
         p, rel = PAPER[int(r[0])]
         print(f"{r[0]:<10}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{b[3]:>8.1%} [{b[4]:.1%}, {b[5]:.1%}]{rel:>6}{p:.0%}")
     paper_like = {r[0]: r[4] for r in budget if r[1] == PAPER_LIKE_BUDGET}
-    print(f"within a shared budget of {PAPER_LIKE_BUDGET} presentations: "
-          + ", ".join(f"{n} gait(s) {f:.1%}" for n, f in paper_like.items()))
+    print(
+        f"within a shared budget of {PAPER_LIKE_BUDGET} presentations: "
+        + ", ".join(f"{n} gait(s) {f:.1%}" for n, f in paper_like.items())
+    )
     print(f"wrote {out / 'gait_convergence.csv'} and {out / 'gait_convergence.png'}")
     return 0
 
@@ -169,8 +183,15 @@ def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, 
             im = ax.imshow(100 * grid, vmin=0, vmax=100, cmap="viridis", origin="lower", aspect="auto")
             for a in range(len(alphas)):
                 for l in range(len(lrs)):
-                    ax.text(l, a, f"{100 * grid[a, l]:.0f}", ha="center", va="center", fontsize=7,
-                            color="w" if grid[a, l] < 0.6 else "k")
+                    ax.text(
+                        l,
+                        a,
+                        f"{100 * grid[a, l]:.0f}",
+                        ha="center",
+                        va="center",
+                        fontsize=7,
+                        color="w" if grid[a, l] < 0.6 else "k",
+                    )
             ax.set_xticks(range(len(lrs)), [f"{v:g}" for v in lrs])
             ax.set_yticks(range(len(alphas)), [f"{v:g}" for v in alphas])
             if i == len(budgets) - 1:
@@ -183,8 +204,9 @@ def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, 
     fig.savefig(path, dpi=110)
 
 
-def run_gait_choices(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
-                     no_progress: bool = False) -> int:
+def run_gait_choices(
+    *, out: str | Path, trials: int | None = None, chunk_size: int | None = None, no_progress: bool = False
+) -> int:
     """``spikejax reproduce gait-choices --out DIR [--trials N]``: ``gait_choices.csv`` and ``.png``, and a table.
 
     Args:
@@ -202,7 +224,18 @@ def run_gait_choices(*, out: str | Path, trials: int | None = None, chunk_size: 
         ok = table["converged"][m]
         row.append(round(float(np.mean(ok & (table["epochs"][m] <= 50))), 4))
         row.append(float(np.median(table["epochs"][m][ok])) if ok.any() else float("nan"))
-    header = ["alpha", "w_high", "lr", "trials", "converged", "fraction", "ci_low", "ci_high", "fraction_50", "median_epochs"]
+    header = [
+        "alpha",
+        "w_high",
+        "lr",
+        "trials",
+        "converged",
+        "fraction",
+        "ci_low",
+        "ci_high",
+        "fraction_50",
+        "median_epochs",
+    ]
     write_csv(out / "gait_choices.csv", header, rows)
     max_epochs = int(table["epochs"].max())
     _plot_choices(out / "gait_choices.png", table, (50, max(max_epochs, 50)))
@@ -219,7 +252,7 @@ gaits_command = Command(
     add_arguments=_add_arguments,
     run=run_gaits,
     description="Fig. 4 of the hexapod SCPG paper: convergence of one, two and three gaits, with 95 % Wilson "
-                "intervals, for the interleaved and the blocked schedule, and against the training budget.",
+    "intervals, for the interleaved and the blocked schedule, and against the training budget.",
 )
 gait_choices_command = Command(
     help="three-gait convergence over alpha, the initial weights and the update scale",

@@ -30,12 +30,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax import DiscreteLIFParams
-from spikejax.errors import UserError
-from spikejax.random import hash_seed, hash_uniform
-from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
 from robots.hexapod.cpg import RECURRENT_MASK, CPGWeights, cpg_init, cpg_step, cpg_weights_init, run_gait
 from robots.hexapod.gaits import N_GAITS, N_LEGS, PATTERNS, PERIOD
+from spikejax import DiscreteLIFParams
+from spikejax.errors import UserError
+from spikejax.plasticity import StochasticSupervisedParams, stochastic_supervised
+from spikejax.random import hash_seed, hash_uniform
 
 _RULE = stochastic_supervised()
 

@@ -80,14 +80,15 @@ def replay_trial(
         ``(train_result, rasters)``: the `TrainResult` and the CPG raster
         of each gait switched on from rest, shape (3, eval_cycles * PERIOD, 6).
     """
-    from spikejax import DiscreteLIFParams
-    from spikejax.sweep import trial_key
     from robots.hexapod.cpg import run_gait
     from robots.hexapod.gaits import PERIOD
+    from spikejax import DiscreteLIFParams
+    from spikejax.sweep import trial_key
 
     p = TrainParams(*(jnp.asarray(v, jnp.float32) for v in params))
-    result = train(p, train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule,
-                   key=trial_key(base_seed, seed))
+    result = train(
+        p, train_cycles=train_cycles, max_epochs=max_epochs, schedule=schedule, key=trial_key(base_seed, seed)
+    )
     neuron = DiscreteLIFParams(alpha=p.alpha, v_th=p.v_th)
     rasters = jnp.stack([run_gait(neuron, result.weights, g, eval_cycles * PERIOD) for g in range(N_GAITS)])
     return result, rasters

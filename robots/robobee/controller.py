@@ -37,27 +37,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from spikejax.coding import DecoderParams
-from spikejax.coding import DecoderState
-from spikejax.coding import antagonist_currents
-from spikejax.coding import decoder_init
-from spikejax.coding import decoder_step
-from spikejax.coding import shift_scale
+from spikejax.coding import DecoderParams, DecoderState, antagonist_currents, decoder_init, decoder_step, shift_scale
 from spikejax.errors import UserError
-from spikejax.neurons import LIFParams
-from spikejax.neurons import LIFState
-from spikejax.neurons import lif_init
-from spikejax.neurons import lif_step
-from spikejax.plasticity.hebbian import RewardHebbianParams
-from spikejax.plasticity.hebbian import RewardHebbianState
-from spikejax.plasticity.hebbian import reward_modulated_hebbian
-from spikejax.plasticity.hebbian import row_increment
-from spikejax.synapses import RowWeights
-from spikejax.synapses import add_to_rows
-from spikejax.synapses import connected
-from spikejax.synapses import dense
-from spikejax.synapses import propagate
-from spikejax.synapses import row_weights
+from spikejax.neurons import LIFParams, LIFState, lif_init, lif_step
+from spikejax.plasticity.hebbian import RewardHebbianParams, RewardHebbianState, reward_modulated_hebbian, row_increment
+from spikejax.synapses import RowWeights, add_to_rows, connected, dense, propagate, row_weights
 
 __all__ = [
     "N_LATERAL",
@@ -323,9 +307,7 @@ def _validate(config: ControllerConfig) -> None:
         if not isinstance(n, int) or n < 1:
             raise UserError(f"ControllerConfig.{name} must be a positive int, got {n!r}")
     if not 0.0 < config.connectivity <= 1.0:
-        raise UserError(
-            f"ControllerConfig.connectivity must lie in (0, 1], got {config.connectivity!r}"
-        )
+        raise UserError(f"ControllerConfig.connectivity must lie in (0, 1], got {config.connectivity!r}")
 
 
 def _lif(params: ControllerParams, tau: jax.Array, v_th: jax.Array) -> LIFParams:
@@ -342,9 +324,7 @@ def _lif(params: ControllerParams, tau: jax.Array, v_th: jax.Array) -> LIFParams
     )
 
 
-def controller_init(
-    config: ControllerConfig, params: ControllerParams, *, key: jax.Array
-) -> ControllerState:
+def controller_init(config: ControllerConfig, params: ControllerParams, *, key: jax.Array) -> ControllerState:
     """Draws a network as in Section V of the RoboBee paper and puts it at rest.
 
     Each possible synapse exists with probability ``config.connectivity``; existing

@@ -24,8 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from robots.robobee.params import RoboBeeParams
-from robots.robobee.params import max_lift
+from robots.robobee.params import RoboBeeParams, max_lift
 
 __all__ = [
     "LATERAL",

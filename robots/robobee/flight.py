@@ -131,8 +131,10 @@ def fly(
     n_waypoints = plan.waypoints.shape[0]
     n_steps = hold_steps + n_waypoints * segment_steps
     if hold_steps % record_every or segment_steps % record_every:
-        raise UserError(f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
-                         f"record_every ({record_every})")
+        raise UserError(
+            f"hold_steps ({hold_steps}) and segment_steps ({segment_steps}) must be multiples of "
+            f"record_every ({record_every})"
+        )
     lat = jnp.asarray(LATERAL)
     targets = jnp.concatenate([plan.q0[None], plan.waypoints])
     dt = cparams.dt

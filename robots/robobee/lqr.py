@@ -20,10 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
-from robots.robobee.dynamics import LATERAL
-from robots.robobee.dynamics import rhs
-from robots.robobee.params import RoboBeeParams
-from robots.robobee.params import max_lift
+from robots.robobee.dynamics import LATERAL, rhs
+from robots.robobee.params import RoboBeeParams, max_lift
 
 __all__ = [
     "AltitudeParams",
@@ -207,9 +205,7 @@ def altitude_params(kp=100.0, kd=20.0, cos_min=0.5, dtype=jnp.float32) -> Altitu
     return AltitudeParams(kp=f(kp), kd=f(kd), cos_min=f(cos_min))
 
 
-def altitude_control(
-    gains: AltitudeParams, q: jax.Array, q_target: jax.Array, params: RoboBeeParams
-) -> jax.Array:
+def altitude_control(gains: AltitudeParams, q: jax.Array, q_target: jax.Array, params: RoboBeeParams) -> jax.Array:
     """The altitude controller ``u_alt``: PD on ``z`` with gravity and tilt compensation.
 
     ``f_L = m (g + kp (z* - z) + kd (z_dot* - z_dot)) / max(cos theta, cos_min)``,

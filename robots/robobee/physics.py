@@ -89,9 +89,7 @@ def set_params(model: mjx.Model, params: RoboBeeParams) -> mjx.Model:
         body_mass=model.body_mass.at[_BEE].set(mass),
         body_subtreemass=model.body_subtreemass.at[_BEE].set(mass).at[0].set(mass),
         body_inertia=model.body_inertia.at[_BEE, 1].set(jnp.asarray(params.inertia_y, dtype)),
-        opt=model.opt.replace(
-            gravity=jnp.zeros(3, dtype).at[2].set(-jnp.asarray(params.g, dtype))
-        ),
+        opt=model.opt.replace(gravity=jnp.zeros(3, dtype).at[2].set(-jnp.asarray(params.g, dtype))),
     )
 
 
@@ -105,9 +103,7 @@ def state_of(data: mjx.Data) -> jax.Array:
         ``q`` in rad, rad/s, m, m/s, shape ``(6,)``.
     """
     qpos, qvel = data.qpos, data.qvel
-    return jnp.stack(
-        [qpos[_THETA], qvel[_THETA], qpos[_X], qpos[_Z], qvel[_X], qvel[_Z]]
-    )
+    return jnp.stack([qpos[_THETA], qvel[_THETA], qpos[_X], qpos[_Z], qvel[_X], qvel[_Z]])
 
 
 @jax.jit
@@ -133,9 +129,7 @@ def data_at(model: mjx.Model, q: jax.Array) -> mjx.Data:
     return mjx.kinematics(model, data)
 
 
-def generalized_forces(
-    q: jax.Array, params: RoboBeeParams, f_lift: jax.Array, tau_c: jax.Array
-) -> jax.Array:
+def generalized_forces(q: jax.Array, params: RoboBeeParams, f_lift: jax.Array, tau_c: jax.Array) -> jax.Array:
     """The wings' forces as generalised forces on ``(x, z, theta)``.
 
     The lift ``f_L z'`` and the drag ``f_d x'`` act at the wings' centre of

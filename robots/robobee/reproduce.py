@@ -28,13 +28,13 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
-from spikejax.commands import Command, add_common
-from spikejax.stats import wilson_interval
 from robots.common import run_named_sweep, write_csv
-from spikejax.sweep import trial_key
 from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.lqr import altitude_params
 from robots.robobee.params import robobee_params
+from spikejax.commands import Command, add_common
+from spikejax.stats import wilson_interval
+from spikejax.sweep import trial_key
 
 FLIGHTS = {0: "flight 1 (q0 -> q1 -> q2)", 1: "flight 2 (landing)"}
 
@@ -49,18 +49,43 @@ def flight_rows(table: dict[str, np.ndarray]) -> list[list]:
             low, high = wilson_interval(k, n)
             rms = table["rms_error"][m]
             med = lambda c: float(np.median(table[c][m]))  # noqa: E731
-            rows.append([
-                FLIGHTS[landing], "SNN" if use_snn else "LQR", n, round(k / n, 4), round(float(low), 4),
-                round(float(high), 4), round(float(np.median(rms)), 4), round(float(np.percentile(rms, 10)), 4),
-                round(float(np.percentile(rms, 90)), 4), round(med("error_1") * 1e3, 3), round(med("error_2") * 1e3, 3),
-                round(med("settle_1"), 3), round(med("settle_2"), 3), round(float(np.max(table["max_theta"][m])), 3),
-            ])
+            rows.append(
+                [
+                    FLIGHTS[landing],
+                    "SNN" if use_snn else "LQR",
+                    n,
+                    round(k / n, 4),
+                    round(float(low), 4),
+                    round(float(high), 4),
+                    round(float(np.median(rms)), 4),
+                    round(float(np.percentile(rms, 10)), 4),
+                    round(float(np.percentile(rms, 90)), 4),
+                    round(med("error_1") * 1e3, 3),
+                    round(med("error_2") * 1e3, 3),
+                    round(med("settle_1"), 3),
+                    round(med("settle_2"), 3),
+                    round(float(np.max(table["max_theta"][m])), 3),
+                ]
+            )
     return rows
 
 
-HEADER = ["flight", "controller", "flights", "reached", "ci_low", "ci_high", "rms_control_error_median",
-          "rms_control_error_p10", "rms_control_error_p90", "error_1_mm", "error_2_mm", "settle_1_s", "settle_2_s",
-          "max_theta_rad"]
+HEADER = [
+    "flight",
+    "controller",
+    "flights",
+    "reached",
+    "ci_low",
+    "ci_high",
+    "rms_control_error_median",
+    "rms_control_error_p10",
+    "rms_control_error_p90",
+    "error_1_mm",
+    "error_2_mm",
+    "settle_1_s",
+    "settle_2_s",
+    "max_theta_rad",
+]
 
 
 def _replay(landing: int, seed: int = 0):
@@ -73,8 +98,18 @@ def _replay(landing: int, seed: int = 0):
     robot = robobee_params()
     plan = flight_plan("landing" if landing else "waypoints")
     key_net, _ = jax.random.split(trial_key(0, seed))
-    run = jax.jit(lambda use: fly(ControllerConfig(), controller_params(), robot, jnp.asarray(nominal_gain()),
-                                  altitude_params(), plan, use, key=key_net))
+    run = jax.jit(
+        lambda use: fly(
+            ControllerConfig(),
+            controller_params(),
+            robot,
+            jnp.asarray(nominal_gain()),
+            altitude_params(),
+            plan,
+            use,
+            key=key_net,
+        )
+    )
     return plan, jax.device_get(run(True)), jax.device_get(run(False))
 
 
@@ -138,8 +173,9 @@ def _add_arguments(parser) -> None:
     add_common(parser, trials="seeds per condition (default: the sweep file's)", chunk_size=True)
 
 
-def run_flights(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
-                no_progress: bool = False) -> int:
+def run_flights(
+    *, out: str | Path, trials: int | None = None, chunk_size: int | None = None, no_progress: bool = False
+) -> int:
     """``spikejax reproduce robobee --out DIR [--trials N]``: the files of the module docstring, and a table.
 
     Args:
@@ -159,13 +195,23 @@ def run_flights(*, out: str | Path, trials: int | None = None, chunk_size: int |
     _plot_seeds(out / "robobee_seeds.png", table)
     print(f"{'flight':<28}{'ctrl':<6}{'reached':>22}{'rms err':>9}{'err1 mm':>9}{'err2 mm':>9}{'settle1':>9}")
     for r in rows:
-        print(f"{r[0]:<28}{r[1]:<6}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{r[6]:>9.3f}{r[9]:>9.2f}{r[10]:>9.2f}{r[11]:>9.2f}")
+        print(
+            f"{r[0]:<28}{r[1]:<6}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{r[6]:>9.3f}{r[9]:>9.2f}{r[10]:>9.2f}{r[11]:>9.2f}"
+        )
     print(f"wrote {out / 'robobee.csv'} and figures in {out}")
     return 0
 
 
-def _success_map(out: Path, name: str, table: dict[str, np.ndarray], rows_axis: str, cols_axis: str,
-                 labels: tuple[str, str], title: str, fmt=("{:g}".format, "{:g}".format)) -> list[list]:
+def _success_map(
+    out: Path,
+    name: str,
+    table: dict[str, np.ndarray],
+    rows_axis: str,
+    cols_axis: str,
+    labels: tuple[str, str],
+    title: str,
+    fmt=("{:g}".format, "{:g}".format),
+) -> list[list]:
     """Success rate over two grid axes: ``out/NAME.csv`` (Wilson intervals) and ``out/NAME.png``."""
     row_values, col_values = np.unique(table[rows_axis]), np.unique(table[cols_axis])
     rows, grid = [], np.zeros((len(row_values), len(col_values)))
@@ -175,11 +221,23 @@ def _success_map(out: Path, name: str, table: dict[str, np.ndarray], rows_axis: 
             n, k = int(m.sum()), int(table["reached"][m].sum())
             low, high = wilson_interval(k, n)
             grid[i, j] = k / n
-            rows.append([rv.item(), cv.item(), n, k, round(k / n, 4), round(float(low), 4), round(float(high), 4),
-                         round(float(np.median(table["rms_error"][m])), 4)])
-    write_csv(out / f"{name}.csv",
-              [rows_axis, cols_axis, "flights", "reached", "fraction", "ci_low", "ci_high", "rms_control_error_median"],
-              rows)
+            rows.append(
+                [
+                    rv.item(),
+                    cv.item(),
+                    n,
+                    k,
+                    round(k / n, 4),
+                    round(float(low), 4),
+                    round(float(high), 4),
+                    round(float(np.median(table["rms_error"][m])), 4),
+                ]
+            )
+    write_csv(
+        out / f"{name}.csv",
+        [rows_axis, cols_axis, "flights", "reached", "fraction", "ci_low", "ci_high", "rms_control_error_median"],
+        rows,
+    )
     fig = Figure(figsize=(5.5, 4.2), layout="constrained")
     ax = fig.subplots()
     im = ax.imshow(100 * grid, vmin=0, vmax=100, cmap="viridis", origin="lower")
@@ -198,8 +256,9 @@ def _success_map(out: Path, name: str, table: dict[str, np.ndarray], rows_axis: 
     return rows
 
 
-def run_learning(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
-                 no_progress: bool = False) -> int:
+def run_learning(
+    *, out: str | Path, trials: int | None = None, chunk_size: int | None = None, no_progress: bool = False
+) -> int:
     """``spikejax reproduce robobee-learning --out DIR [--trials N]``: success over mu and tau.
 
     Args:
@@ -211,14 +270,22 @@ def run_learning(*, out: str | Path, trials: int | None = None, chunk_size: int 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     table = run_named_sweep("robobee_learning", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
-    _success_map(out, "robobee_learning", table, "mu", "tau_reward",
-                 ("learning rate mu", "reward time constant tau (ms)"),
-                 "flight 1, robots +-20 %: both waypoints reached (%)", ("{:g}".format, lambda tau: f"{1e3 * tau:g}"))
+    _success_map(
+        out,
+        "robobee_learning",
+        table,
+        "mu",
+        "tau_reward",
+        ("learning rate mu", "reward time constant tau (ms)"),
+        "flight 1, robots +-20 %: both waypoints reached (%)",
+        ("{:g}".format, lambda tau: f"{1e3 * tau:g}"),
+    )
     return 0
 
 
-def run_populations(*, out: str | Path, trials: int | None = None, chunk_size: int | None = None,
-                    no_progress: bool = False) -> int:
+def run_populations(
+    *, out: str | Path, trials: int | None = None, chunk_size: int | None = None, no_progress: bool = False
+) -> int:
     """``spikejax reproduce robobee-populations --out DIR [--trials N]``: success over the layer sizes.
 
     Args:
@@ -229,11 +296,16 @@ def run_populations(*, out: str | Path, trials: int | None = None, chunk_size: i
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_populations", out, trials=trials, chunk_size=chunk_size,
-                            progress=not no_progress)
-    _success_map(out, "robobee_populations", table, "n_per_input", "n_hidden",
-                 ("input neurons per state variable", "hidden neurons"),
-                 "flight 1, robots +-20 %, 50 output neurons: both waypoints reached (%)")
+    table = run_named_sweep("robobee_populations", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
+    _success_map(
+        out,
+        "robobee_populations",
+        table,
+        "n_per_input",
+        "n_hidden",
+        ("input neurons per state variable", "hidden neurons"),
+        "flight 1, robots +-20 %, 50 output neurons: both waypoints reached (%)",
+    )
     return 0
 
 

@@ -126,6 +126,17 @@ def flight_trial(
     )
     config = ControllerConfig(n_per_input=n_per_input, n_hidden=n_hidden, n_output=n_output)
     plan = _plan(jnp.asarray(params.landing))
-    rec = fly(config, cparams, robot, K, altitude_params(), plan, jnp.asarray(params.use_snn) > 0,
-              hold_steps=hold_steps, segment_steps=segment_steps, record_every=record_every, key=key_net)
+    rec = fly(
+        config,
+        cparams,
+        robot,
+        K,
+        altitude_params(),
+        plan,
+        jnp.asarray(params.use_snn) > 0,
+        hold_steps=hold_steps,
+        segment_steps=segment_steps,
+        record_every=record_every,
+        key=key_net,
+    )
     return summarize(rec, plan, hold_steps, segment_steps, record_every)

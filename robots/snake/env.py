@@ -70,10 +70,9 @@ from brax.envs.base import Env, State
 from robots.snake import camera as cam
 from robots.snake import tracks
 from robots.snake.gait import GaitParams, gait_params, gait_period, joint_targets
-from robots.snake.physics import CONTROL_DT, joint_qpos_index, make_physics
+from robots.snake.physics import joint_qpos_index, make_physics
 from spikejax.errors import UserError
-from spikejax.vision import dvs
-from spikejax.vision import render
+from spikejax.vision import dvs, render
 
 __all__ = ["LOST_BODY_ANGLE", "LOST_HEAD_ANGLE", "SNAKE_SPEED", "SnakeEnv", "SnakeEnvParams", "rollout"]
 
@@ -124,10 +123,22 @@ class SnakeEnv(Env):
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
-    def __init__(self, track: str = "eight", backend: str = "mujoco", *, camera: bool = True,
-                 event_threshold: float = 0.05, event_capacity: int = 2048, target_speed: float = 1.2 * SNAKE_SPEED,
-                 max_steer: float = 0.25, max_head_offset: float = 0.5, compensate: bool = True,
-                 gait: GaitParams | None = None, pipes: render.Cylinders | None = None, **physics_kwargs: Any):
+    def __init__(
+        self,
+        track: str = "eight",
+        backend: str = "mujoco",
+        *,
+        camera: bool = True,
+        event_threshold: float = 0.05,
+        event_capacity: int = 2048,
+        target_speed: float = 1.2 * SNAKE_SPEED,
+        max_steer: float = 0.25,
+        max_head_offset: float = 0.5,
+        compensate: bool = True,
+        gait: GaitParams | None = None,
+        pipes: render.Cylinders | None = None,
+        **physics_kwargs: Any,
+    ):
         if event_capacity < 1:
             raise UserError(f"event_capacity must be at least 1, got {event_capacity}")
         if not event_threshold > 0:
@@ -140,8 +151,9 @@ class SnakeEnv(Env):
         self._joints = np.asarray(joint_qpos_index(self.physics.mj_model))
         self.camera_on = bool(camera)
         self.event_capacity = int(event_capacity)
-        self.params = SnakeEnvParams(*(jnp.asarray(x, jnp.float32) for x in (
-            max_steer, max_head_offset, target_speed, event_threshold)))
+        self.params = SnakeEnvParams(
+            *(jnp.asarray(x, jnp.float32) for x in (max_steer, max_head_offset, target_speed, event_threshold))
+        )
         self.compensate = bool(compensate)
         self.gait = gait_params() if gait is None else gait
         self.pipes = pipes
@@ -174,8 +186,7 @@ class SnakeEnv(Env):
         ``params`` (default ``self.params``, the constructor's) is kept in
         ``info["params"]`` for every ``step`` of the episode; it may be traced.
         """
-        params = self.params if params is None else SnakeEnvParams(
-            *(jnp.asarray(x, jnp.float32) for x in params))
+        params = self.params if params is None else SnakeEnvParams(*(jnp.asarray(x, jnp.float32) for x in params))
         phys = self.physics.init()
         mirror = jnp.asarray(mirror, bool)
         target_xy = self._target_xy(jnp.float32(0.0), mirror)
@@ -189,14 +200,21 @@ class SnakeEnv(Env):
             "target_s": zero,
             "target_xy": target_xy,
             "frame": frame,
-            "events": dvs.frame_difference(frame, frame, phys.time, threshold=params.event_threshold,
-                                           capacity=self.event_capacity)[0],
+            "events": dvs.frame_difference(
+                frame, frame, phys.time, threshold=params.event_threshold, capacity=self.event_capacity
+            )[0],
             "overflow": jnp.zeros((), jnp.int32),
             "body_angles": jnp.zeros((self.window,), jnp.float32),
             "control_steps": jnp.zeros((), jnp.int32),
         }
-        return State(pipeline_state=phys, obs=self._obs(phys, a_head, a_body), reward=zero, done=zero,
-                     metrics=self._metrics(phys, target_xy, a_head, a_body, info), info=info)
+        return State(
+            pipeline_state=phys,
+            obs=self._obs(phys, a_head, a_body),
+            reward=zero,
+            done=zero,
+            metrics=self._metrics(phys, target_xy, a_head, a_body, info),
+            info=info,
+        )
 
     def step(self, state: State, action: jax.Array) -> State:
         """One control step (see the module docstring)."""
@@ -222,17 +240,30 @@ class SnakeEnv(Env):
         frame = self._frame(phys, target_xy)
         if self.camera_on:
             previous = jnp.where(fresh, frame, info["frame"])
-            events, overflow = dvs.frame_difference(previous, frame, phys.time, threshold=params.event_threshold,
-                                                    capacity=self.event_capacity)
+            events, overflow = dvs.frame_difference(
+                previous, frame, phys.time, threshold=params.event_threshold, capacity=self.event_capacity
+            )
         else:
             events, overflow = info["events"], info["overflow"]
         body_angles = info["body_angles"].at[info["control_steps"] % self.window].set(a_body)
-        info.update(target_s=target_s, target_xy=target_xy, frame=frame, events=events, overflow=overflow,
-                    body_angles=body_angles, control_steps=info["control_steps"] + 1)
+        info.update(
+            target_s=target_s,
+            target_xy=target_xy,
+            frame=frame,
+            events=events,
+            overflow=overflow,
+            body_angles=body_angles,
+            control_steps=info["control_steps"] + 1,
+        )
         lost = (jnp.abs(a_head) > LOST_HEAD_ANGLE) | (jnp.abs(jnp.mean(body_angles)) > LOST_BODY_ANGLE)
-        return state.replace(pipeline_state=phys, obs=self._obs(phys, a_head, a_body), reward=-jnp.abs(a_head),
-                             done=lost.astype(jnp.float32),
-                             metrics=self._metrics(phys, target_xy, a_head, a_body, info), info=info)
+        return state.replace(
+            pipeline_state=phys,
+            obs=self._obs(phys, a_head, a_body),
+            reward=-jnp.abs(a_head),
+            done=lost.astype(jnp.float32),
+            metrics=self._metrics(phys, target_xy, a_head, a_body, info),
+            info=info,
+        )
 
     # ------------------------------------------------------------ parts
 

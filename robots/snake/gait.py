@@ -58,7 +58,7 @@ N_JOINTS = 16
 JOINT_LIMIT = math.pi / 2  # rad, the joints' range of Sec. II-A
 
 _I = jnp.arange(1, N_JOINTS + 1, dtype=jnp.float32)  # joint numbers 1..16
-_ODD = (jnp.arange(1, N_JOINTS + 1) % 2 == 1)
+_ODD = jnp.arange(1, N_JOINTS + 1) % 2 == 1
 
 
 class GaitParams(NamedTuple):
@@ -114,9 +114,17 @@ def gait_params() -> GaitParams:
     Omega_o = -2 * math.pi / 16
     omega_o = 2 * math.pi / 2.5
     return GaitParams(
-        A_o=math.radians(30.0), Omega_o=Omega_o, omega_o=omega_o, delta_o=0.0, C_o=0.0,
-        A_e=math.radians(5.0), Omega_e=2 * Omega_o, omega_e=2 * omega_o, C_e=0.0,
-        P_head=1.0, P_tail=1.0,
+        A_o=math.radians(30.0),
+        Omega_o=Omega_o,
+        omega_o=omega_o,
+        delta_o=0.0,
+        C_o=0.0,
+        A_e=math.radians(5.0),
+        Omega_e=2 * Omega_o,
+        omega_e=2 * omega_o,
+        C_e=0.0,
+        P_head=1.0,
+        P_tail=1.0,
     )
 
 
@@ -187,4 +195,3 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
     head = jnp.where(compensate, head_compensation(alpha), alpha[0])
     alpha = alpha.at[0].set(head + head_offset)
     return jnp.clip(alpha, -JOINT_LIMIT, JOINT_LIMIT)
-

@@ -163,8 +163,9 @@ def load_mj_model(settings: str = "tuned", dt: float | None = None) -> mujoco.Mj
             geom.contype = 0
             geom.conaffinity = 0
         for k in range(N_MODULES):
-            spec.add_pair(geomname1="floor", geomname2=f"module{k}", condim=3,
-                          friction=[0.5, 0.5, 0.005, 0.0001, 0.0001])
+            spec.add_pair(
+                geomname1="floor", geomname2=f"module{k}", condim=3, friction=[0.5, 0.5, 0.005, 0.0001, 0.0001]
+            )
         spec.option.solver = mujoco.mjtSolver.mjSOL_CG
         spec.option.iterations = TUNED_ITERATIONS
         spec.option.ls_iterations = TUNED_LS_ITERATIONS
@@ -186,11 +187,13 @@ def joint_qpos_index(model: mujoco.MjModel) -> np.ndarray:
 def _quat_to_mat(q):
     q = q / jnp.linalg.norm(q)
     w, x, y, z = q
-    return jnp.stack([
-        jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)]),
-        jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)]),
-        jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]),
-    ])
+    return jnp.stack(
+        [
+            jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)]),
+            jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)]),
+            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]),
+        ]
+    )
 
 
 def _axis_rotation(axis, angle):
@@ -244,9 +247,21 @@ def _chains(model_key) -> _Chains:
     site = model.site(HEAD_SITE)
     site_rot = np.zeros(9)
     mujoco.mju_quat2Mat(site_rot, site.quat)
-    return _Chains(root, int(model.jnt_qposadr[free[0]]), body, model.jnt_qposadr[jnt], model.body_pos[body], rot,
-                   model.jnt_pos[jnt], model.jnt_axis[jnt], model.body_mass.copy(), model.body_ipos.copy(),
-                   int(site.bodyid[0]), site.pos.copy(), site_rot.reshape(3, 3))
+    return _Chains(
+        root,
+        int(model.jnt_qposadr[free[0]]),
+        body,
+        model.jnt_qposadr[jnt],
+        model.body_pos[body],
+        rot,
+        model.jnt_pos[jnt],
+        model.jnt_axis[jnt],
+        model.body_mass.copy(),
+        model.body_ipos.copy(),
+        int(site.bodyid[0]),
+        site.pos.copy(),
+        site_rot.reshape(3, 3),
+    )
 
 
 def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float | None = None):
@@ -271,7 +286,7 @@ def forward_kinematics(qpos: jax.Array, settings: str = "tuned", dt: float | Non
     tree = _chains((settings, dt))
     dtype = qpos.dtype
     a = tree.root_qadr
-    root_pos, root_mat = qpos[a:a + 3], _quat_to_mat(qpos[a + 3:a + 7])
+    root_pos, root_mat = qpos[a : a + 3], _quat_to_mat(qpos[a + 3 : a + 7])
     links = tuple(jnp.asarray(x, dtype) for x in (tree.pos, tree.rot, tree.jnt_pos, tree.jnt_axis))
     angles = qpos[tree.qadr]
 
@@ -429,24 +444,40 @@ class _CRunner:
     def _threaded(self, state: np.ndarray, control: np.ndarray) -> np.ndarray:
         n = state.shape[0]
         if n not in self.buffers:
-            self.buffers[n] = ([self.model] * n, np.zeros((n, self.nv)),
-                               np.empty((n, self.substeps, self.nstate)), np.empty((n, self.substeps, 0)))
+            self.buffers[n] = (
+                [self.model] * n,
+                np.zeros((n, self.nv)),
+                np.empty((n, self.substeps, self.nstate)),
+                np.empty((n, self.substeps, 0)),
+            )
         models, warmstart, out, sensordata = self.buffers[n]
         control = np.ascontiguousarray(np.broadcast_to(control[:, None, :], (n, self.substeps, control.shape[1])))
-        self.pool.rollout(models, self.datas, state, control, skip_checks=True, nstep=self.substeps,
-                          initial_warmstart=warmstart, state=out, sensordata=sensordata,
-                          chunk_size=max(1, n // (4 * self.nthread)))
+        self.pool.rollout(
+            models,
+            self.datas,
+            state,
+            control,
+            skip_checks=True,
+            nstep=self.substeps,
+            initial_warmstart=warmstart,
+            state=out,
+            sensordata=sensordata,
+            chunk_size=max(1, n // (4 * self.nthread)),
+        )
         return out[:, -1, :]
 
     def __call__(self, qpos, qvel, act, time, ctrl):
         batch_shape = time.shape
         n = int(np.prod(batch_shape, dtype=np.int64))
-        state = np.concatenate([
-            np.asarray(time, np.float64).reshape(n, 1),
-            np.asarray(qpos, np.float64).reshape(n, self.nq),
-            np.asarray(qvel, np.float64).reshape(n, self.nv),
-            np.asarray(act, np.float64).reshape(n, self.na),
-        ], axis=1)
+        state = np.concatenate(
+            [
+                np.asarray(time, np.float64).reshape(n, 1),
+                np.asarray(qpos, np.float64).reshape(n, self.nq),
+                np.asarray(qvel, np.float64).reshape(n, self.nv),
+                np.asarray(act, np.float64).reshape(n, self.na),
+            ],
+            axis=1,
+        )
         control = np.asarray(ctrl, np.float64).reshape(n, self.model.nu)
         with self.lock:
             if self.pool is not None and n >= self.nthread:
@@ -455,21 +486,28 @@ class _CRunner:
                 final = self._serial(state, control)
         final = final.astype(np.float32)
         i = np.cumsum([1, self.nq, self.nv])
-        return (final[:, i[0]:i[1]].reshape(*batch_shape, self.nq),
-                final[:, i[1]:i[2]].reshape(*batch_shape, self.nv),
-                final[:, i[2]:].reshape(*batch_shape, self.na),
-                final[:, 0].reshape(batch_shape))
+        return (
+            final[:, i[0] : i[1]].reshape(*batch_shape, self.nq),
+            final[:, i[1] : i[2]].reshape(*batch_shape, self.nv),
+            final[:, i[2] :].reshape(*batch_shape, self.na),
+            final[:, 0].reshape(batch_shape),
+        )
 
 
 def _mujoco_backend(model, substeps, nthread, settings, dt):
     runner = _CRunner(model, substeps, nthread)
-    shapes = (jax.ShapeDtypeStruct((model.nq,), jnp.float32), jax.ShapeDtypeStruct((model.nv,), jnp.float32),
-              jax.ShapeDtypeStruct((model.na,), jnp.float32), jax.ShapeDtypeStruct((), jnp.float32))
+    shapes = (
+        jax.ShapeDtypeStruct((model.nq,), jnp.float32),
+        jax.ShapeDtypeStruct((model.nv,), jnp.float32),
+        jax.ShapeDtypeStruct((model.na,), jnp.float32),
+        jax.ShapeDtypeStruct((), jnp.float32),
+    )
 
     def step(state: PhysState, ctrl: jax.Array) -> PhysState:
         ctrl = jnp.asarray(ctrl, jnp.float32)
-        qpos, qvel, act, time = jax.pure_callback(runner, shapes, state.qpos, state.qvel, state.act, state.time,
-                                                  ctrl, vmap_method="broadcast_all")
+        qpos, qvel, act, time = jax.pure_callback(
+            runner, shapes, state.qpos, state.qvel, state.act, state.time, ctrl, vmap_method="broadcast_all"
+        )
         return _observe(qpos, qvel, act, time, settings, dt)
 
     return step
@@ -482,8 +520,9 @@ def _mjx_backend(model, substeps, settings, dt):
         mx = mjx.put_model(model)
 
     def step(state: PhysState, ctrl: jax.Array) -> PhysState:
-        data = mjx.make_data(mx).replace(qpos=state.qpos, qvel=state.qvel, act=state.act, time=state.time,
-                                         ctrl=jnp.asarray(ctrl, jnp.float32))
+        data = mjx.make_data(mx).replace(
+            qpos=state.qpos, qvel=state.qvel, act=state.act, time=state.time, ctrl=jnp.asarray(ctrl, jnp.float32)
+        )
 
         def sub(d, _):
             return mjx.step(mx, d), None
@@ -495,8 +534,14 @@ def _mjx_backend(model, substeps, settings, dt):
     return step
 
 
-def make_physics(backend: str = "mujoco", *, dt: float | None = None, substeps: int | None = None,
-                 nthread: int | None = None, settings: str = "tuned") -> SnakePhysics:
+def make_physics(
+    backend: str = "mujoco",
+    *,
+    dt: float | None = None,
+    substeps: int | None = None,
+    nthread: int | None = None,
+    settings: str = "tuned",
+) -> SnakePhysics:
     """The snake's physics with the given backend (see the module's notes).
 
     Args:

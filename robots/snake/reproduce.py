@@ -27,7 +27,6 @@ Everything runs with the ``mujoco`` physics backend. ``SPIKEJAX_SNAKE_SCALE``
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,11 +36,10 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
-from spikejax.commands import Command, add_common
 from robots.common import write_csv
-from robots.snake import steering
-from robots.snake import tracks
+from robots.snake import steering, tracks
 from robots.snake.gait import gait_params, gait_period, joint_targets
+from spikejax.commands import Command, add_common
 from spikejax.errors import UserError
 
 if TYPE_CHECKING:
@@ -55,8 +53,14 @@ GAIT_PERIODS = 8  # gait periods per steering rollout
 STRIP_STEPS = 300  # control steps of the camera run (6 s)
 TRACK_SECONDS = 400.0  # the steering baseline's time on each track: at 0.1 m/s, both lobes of the 8
 GAIT_HEADER = ["C_o_rad", "compensation", "forward_speed_m_s", "turning_rate_deg_s", "head_yaw_amplitude_deg"]
-TRACK_HEADER = ["track", "seconds", "mean_abs_head_angle_deg", "mean_abs_body_angle_deg", "lost_at_s",
-                "mean_distance_m"]
+TRACK_HEADER = [
+    "track",
+    "seconds",
+    "mean_abs_head_angle_deg",
+    "mean_abs_body_angle_deg",
+    "lost_at_s",
+    "mean_distance_m",
+]
 
 
 def _scale() -> float:
@@ -93,8 +97,7 @@ def gait_rollouts(periods: int = GAIT_PERIODS, steers=STEERS):
 
         return jax.lax.scan(body, phys.init(), None, length=n)[1]
 
-    time, com, mat, xpos = jax.jit(jax.vmap(run))(jnp.array([c[0] for c in cases]),
-                                                  jnp.array([c[1] for c in cases]))
+    time, com, mat, xpos = jax.jit(jax.vmap(run))(jnp.array([c[0] for c in cases]), jnp.array([c[1] for c in cases]))
     return cases, np.asarray(time[0]), np.asarray(com), _yaw(np.asarray(mat)), np.asarray(xpos)
 
 
@@ -107,7 +110,7 @@ def gait_rows(cases, time, com, yaw) -> list[list]:
     for k, (steer, compensate) in enumerate(cases):
         c, y, t = com[k, per:], yaw[k, per:], time[per:]
         whole = (len(t) // per) * per
-        ends = c[per - 1:whole:per, :2]  # the centre of mass once a period
+        ends = c[per - 1 : whole : per, :2]  # the centre of mass once a period
         speed = np.linalg.norm(np.diff(ends, axis=0), axis=1).sum() / (period * max(len(ends) - 1, 1))
         mean_yaw = y[:whole].reshape(-1, per).mean(axis=1)
         turn = np.degrees((mean_yaw[-1] - mean_yaw[0]) / (period * max(len(mean_yaw) - 1, 1)))
@@ -154,8 +157,13 @@ def camera_run(steps: int = STRIP_STEPS):
         state, pstate = carry
         pstate, action = steering.step(params, pstate, state.obs, env.dt)
         state = env.step(state, action)
-        return (state, pstate), (state.info["frame"], state.info["events"], state.pipeline_state.qpos,
-                                 state.info["target_xy"], state.metrics["a_head"])
+        return (state, pstate), (
+            state.info["frame"],
+            state.info["events"],
+            state.pipeline_state.qpos,
+            state.info["target_xy"],
+            state.metrics["a_head"],
+        )
 
     _, record = jax.jit(lambda s: jax.lax.scan(body, (s, steering.init()), None, length=steps))(state)
     return env, jax.device_get(record)
@@ -218,8 +226,9 @@ def track_runs(seconds: float = TRACK_SECONDS, progress: bool = True):
         env = SnakeEnv(base, camera=False)
         steps = max(2, int(round(seconds / env.dt)))
         policy = lambda ps, obs, st, env=env: steering.step(params, ps, obs, env.dt)  # noqa: E731
-        run = jax.jit(jax.vmap(lambda m, env=env, policy=policy, steps=steps: rollout(env, policy, steering.init(),
-                                                                                      steps, m)[0]))
+        run = jax.jit(
+            jax.vmap(lambda m, env=env, policy=policy, steps=steps: rollout(env, policy, steering.init(), steps, m)[0])
+        )
         record = jax.device_get(run(jnp.array([False, True])))
         for i, name in enumerate((base, base + "-mirror")):
             results[name] = {
@@ -240,10 +249,16 @@ def track_rows(results) -> list[list]:
     for name, r in results.items():
         lost = np.nonzero(r["done"] > 0)[0]
         held = slice(0, lost[0] + 1 if len(lost) else None)
-        rows.append([name, round(float(r["time"][-1]), 2), round(float(np.degrees(np.abs(r["a_head"][held]).mean())), 3),
-                     round(float(np.degrees(np.abs(r["a_body"][held]).mean())), 3),
-                     round(float(r["time"][lost[0]]), 2) if len(lost) else "",
-                     round(float(r["distance"][held].mean()), 3)])
+        rows.append(
+            [
+                name,
+                round(float(r["time"][-1]), 2),
+                round(float(np.degrees(np.abs(r["a_head"][held]).mean())), 3),
+                round(float(np.degrees(np.abs(r["a_body"][held]).mean())), 3),
+                round(float(r["time"][lost[0]]), 2) if len(lost) else "",
+                round(float(r["distance"][held].mean()), 3),
+            ]
+        )
     return rows
 
 
@@ -313,8 +328,10 @@ def run_gait(*, out: str | Path, no_progress: bool = False) -> int:
     print("track            mean |a_head| deg   lost at s")
     for r in rows["tracking"]:
         print(f"{r[0]:<16} {r[2]:8.2f}           {r[4] or 'never'}")
-    print(f"wrote {out}/snake_gait.csv, snake_tracking.csv, snake_trajectories.png, snake_events.png, "
-          f"snake_tracking.png, snake.gif")
+    print(
+        f"wrote {out}/snake_gait.csv, snake_tracking.csv, snake_trajectories.png, snake_events.png, "
+        f"snake_tracking.png, snake.gif"
+    )
     return 0
 
 

@@ -98,8 +98,9 @@ def _repeat(unit, length):
 def eight(radius: float = TURN_RADIUS) -> Track:
     """Fig. 5(a): lead-in, then a counter-clockwise lobe above the x axis and a clockwise one below, repeated."""
     lobe = 2.0 * math.pi * radius
-    return from_segments((-LEAD_IN, 0.0), 0.0, [(LEAD_IN, 0.0)] + _repeat([(lobe, 1.0 / radius), (lobe, -1.0 / radius)],
-                                                                          TRACK_LENGTH))
+    return from_segments(
+        (-LEAD_IN, 0.0), 0.0, [(LEAD_IN, 0.0)] + _repeat([(lobe, 1.0 / radius), (lobe, -1.0 / radius)], TRACK_LENGTH)
+    )
 
 
 def ladder(radius: float = TURN_RADIUS, rung: float = 2.0, run: float = 3.0) -> Track:
@@ -118,8 +119,9 @@ def zigzag(radius: float = TURN_RADIUS, leg: float = 4.0) -> Track:
 
 def mirror(track: Track) -> Track:
     """The mirror image about the x axis, ``(x, y) -> (x, -y)``."""
-    return track._replace(start=track.start * jnp.array([1.0, -1.0]), heading=-track.heading,
-                          curvature=-track.curvature)
+    return track._replace(
+        start=track.start * jnp.array([1.0, -1.0]), heading=-track.heading, curvature=-track.curvature
+    )
 
 
 def get(name: str) -> Track:

@@ -90,8 +90,14 @@ def positive_float(text: str) -> float:
     return value
 
 
-def add_common(parser: argparse.ArgumentParser, *, out_required: bool = True, trials: str | None = None,
-               chunk_size: bool = False, progress: bool = True) -> None:
+def add_common(
+    parser: argparse.ArgumentParser,
+    *,
+    out_required: bool = True,
+    trials: str | None = None,
+    chunk_size: bool = False,
+    progress: bool = True,
+) -> None:
     """Declare the flags most commands share: ``--out``, ``--trials``, ``--chunk-size``, ``--no-progress``.
 
     Args:

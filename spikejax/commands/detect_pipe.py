@@ -18,8 +18,7 @@ import numpy as np
 
 from spikejax.commands import Command
 from spikejax.errors import UserError
-from spikejax.vision import io
-from spikejax.vision import pipe
+from spikejax.vision import io, pipe
 from spikejax.vision.detect import Detections, detect, detector_params
 
 __all__ = ["COLUMNS", "command", "draw_line", "edges", "event_frame", "format_table", "overlay", "run", "write_csv"]
@@ -29,19 +28,24 @@ COLUMNS = ("t", "kind", "theta_deg", "width_px", "pos_px", "row_px", "distance_m
 
 def _add_arguments(parser) -> None:
     parser.add_argument("file", help="event recording: .npz, .npy (structured array x, y, t, p) or .aedat4")
-    parser.add_argument("--mode", choices=("sync", "async"), default="sync",
-                        help="slots at once (default) or event by event")
+    parser.add_argument(
+        "--mode", choices=("sync", "async"), default="sync", help="slots at once (default) or event by event"
+    )
     parser.add_argument("--out", default=None, help="write detections.csv and overlay.png here")
     parser.add_argument("--slot", type=float, default=0.02, help="time slot, s (default 0.02)")
-    parser.add_argument("--sub-slots", type=int, default=5,
-                        help="updates per slot; a neuron fires at most once per update")
+    parser.add_argument(
+        "--sub-slots", type=int, default=5, help="updates per slot; a neuron fires at most once per update"
+    )
     parser.add_argument("--capacity", type=int, default=4096, help="events per update (the rest are counted)")
-    parser.add_argument("--sensor-size", type=int, nargs=2, metavar=("W", "H"), default=None,
-                        help="default: the file's, else 128 128")
-    parser.add_argument("--shapes", choices=("both", "lines", "circles"), default="both",
-                        help="bodies (lines), entries (circles)")
-    parser.add_argument("--v-th", type=float, default=None,
-                        help="Hough neuron threshold, votes (default: half the sensor height)")
+    parser.add_argument(
+        "--sensor-size", type=int, nargs=2, metavar=("W", "H"), default=None, help="default: the file's, else 128 128"
+    )
+    parser.add_argument(
+        "--shapes", choices=("both", "lines", "circles"), default="both", help="bodies (lines), entries (circles)"
+    )
+    parser.add_argument(
+        "--v-th", type=float, default=None, help="Hough neuron threshold, votes (default: half the sensor height)"
+    )
     parser.add_argument("--decay", type=float, default=50.0, help="decay rate lambda of Alg. 1, votes/s")
     parser.add_argument("--fov", type=float, default=60.0, help="horizontal field of view, degrees")
     parser.add_argument("--pipe-size", type=float, default=0.0, help="pipe diameter, m, if known (distance by Eq. 8)")
@@ -96,22 +100,36 @@ def run(
         raise UserError(f"{file}: no events")
     if mode == "async" and shapes != "lines":
         # Measured on a 2-core CPU: about 200 events/s (each event updates a ring of cells at each of 64 radii).
-        print(f"note: asynchronous circle detection is slow on a CPU (about 200 events/s; {len(events)} events "
-              f"here); --mode sync, or --shapes lines for bodies only, is much faster", file=sys.stderr)
+        print(
+            f"note: asynchronous circle detection is slow on a CPU (about 200 events/s; {len(events)} events "
+            f"here); --mode sync, or --shapes lines for bodies only, is much faster",
+            file=sys.stderr,
+        )
     track = pipe.track_params(fov=math.radians(fov), width=size[0], size=pipe_size, speed=speed)
     found = detect(
-        events, size, mode=mode, slot=slot, sub_slots=sub_slots, capacity=capacity,
-        lines=shapes != "circles", circles=shapes != "lines",
+        events,
+        size,
+        mode=mode,
+        slot=slot,
+        sub_slots=sub_slots,
+        capacity=capacity,
+        lines=shapes != "circles",
+        circles=shapes != "lines",
         params=detector_params(v_th=0.5 * size[1] if v_th is None else v_th, decay=decay),
-        track=track, progress=not no_progress,
+        track=track,
+        progress=not no_progress,
     )
     rows = found.table()
     duration = (events["t"][-1] - events["t"][0]) * 1e-6
-    print(f"{file}: {len(events)} event{'' if len(events) == 1 else 's'}, {size[0]}x{size[1]} sensor, "
-          f"{duration:.3f} s, {len(found.overflow)} slots of {slot * 1e3:g} ms, mode {mode}")
+    print(
+        f"{file}: {len(events)} event{'' if len(events) == 1 else 's'}, {size[0]}x{size[1]} sensor, "
+        f"{duration:.3f} s, {len(found.overflow)} slots of {slot * 1e3:g} ms, mode {mode}"
+    )
     if found.overflow.sum():
-        print(f"warning: {int(found.overflow.sum())} events did not fit (capacity {capacity} per "
-              f"part) in {int((found.overflow > 0).sum())} slots; raise --capacity")
+        print(
+            f"warning: {int(found.overflow.sum())} events did not fit (capacity {capacity} per "
+            f"part) in {int((found.overflow > 0).sum())} slots; raise --capacity"
+        )
     print(format_table(rows))
     if out:
         out = Path(out)

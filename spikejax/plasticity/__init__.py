@@ -5,12 +5,8 @@
 """
 
 from spikejax.plasticity.base import PlasticityRule
-from spikejax.plasticity.hebbian import RewardHebbianParams
-from spikejax.plasticity.hebbian import RewardHebbianState
-from spikejax.plasticity.hebbian import reward_modulated_hebbian
-from spikejax.plasticity.hebbian import row_increment
-from spikejax.plasticity.supervised import StochasticSupervisedParams
-from spikejax.plasticity.supervised import stochastic_supervised
+from spikejax.plasticity.hebbian import RewardHebbianParams, RewardHebbianState, reward_modulated_hebbian, row_increment
+from spikejax.plasticity.supervised import StochasticSupervisedParams, stochastic_supervised
 
 __all__ = [
     "PlasticityRule",

@@ -108,9 +108,7 @@ def reward_modulated_hebbian() -> PlasticityRule:
     def init(weights: jax.Array) -> RewardHebbianState:
         n_pre = weights.shape[0]
         dtype = weights.dtype if jnp.issubdtype(weights.dtype, jnp.floating) else jnp.float32
-        return RewardHebbianState(
-            since=jnp.full((n_pre,), jnp.inf, dtype), r=jnp.zeros((n_pre,), dtype)
-        )
+        return RewardHebbianState(since=jnp.full((n_pre,), jnp.inf, dtype), r=jnp.zeros((n_pre,), dtype))
 
     def update(
         params: RewardHebbianParams,

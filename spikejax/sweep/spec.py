@@ -211,7 +211,7 @@ def _build_spec(
         raise UserError(f"[sweep] name must be a non-empty string, got {name!r}")
     trial_path = sweep["trial"]
     if not isinstance(trial_path, str) or not _TRIAL_PATH.fullmatch(trial_path):
-        raise UserError(f"[sweep] trial must be a string \"module:function\", got {trial_path!r}")
+        raise UserError(f'[sweep] trial must be a string "module:function", got {trial_path!r}')
     file_seeds = _check_int(sweep["seeds"], "[sweep] seeds", 1, _MAX_SEEDS)
     base_seed = _check_int(sweep.get("base_seed", 0), "[sweep] base_seed", 0, _MAX_BASE_SEED)
     file_chunk_size = _check_int(sweep.get("chunk_size", _DEFAULT_CHUNK_SIZE), "[sweep] chunk_size", 1, None)
@@ -328,9 +328,7 @@ def _import_trial(trial_path: str) -> Callable[..., Any]:
     return target
 
 
-def _trial_signature(
-    trial: Callable[..., Any], trial_path: str
-) -> tuple[type, dict[str, inspect.Parameter], bool]:
+def _trial_signature(trial: Callable[..., Any], trial_path: str) -> tuple[type, dict[str, inspect.Parameter], bool]:
     """The params NamedTuple, the keyword-only parameters, and whether ``**kwargs`` is taken."""
     contract = "a trial is f(params: ParamsNamedTuple, key, *, static=...) -> NamedTuple of scalars"
     try:
@@ -438,4 +436,3 @@ def _with_defaults(
             kind = _value_kind([default], f"the default of {params_type.__name__}.{field}")
         traced[field] = np.asarray(default, dtype=_KIND_DTYPES[kind] if kind else None)
     return traced
-

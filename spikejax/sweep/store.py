@@ -402,9 +402,7 @@ class Store:
         """Rebuilds ``results.csv`` from the parts (where it is not whole) and writes ``metadata.json``."""
         began = time.perf_counter()
         results = self.out / _RESULTS
-        if self._parts and (
-            not results.exists() or results.stat().st_size != _table_size(self._header, self._parts)
-        ):
+        if self._parts and (not results.exists() or results.stat().st_size != _table_size(self._header, self._parts)):
             _write_table(self.out, self._header, self._parts)
         self.metadata["done_trials"] = self.done
         _write_metadata(self.out, self.metadata)

@@ -1,19 +1,9 @@
 """Event vision: event streams, the DVS emulator, spiking Hough grids, pipe geometry."""
 
-from spikejax.vision.events import Events
-from spikejax.vision.events import compact
-from spikejax.vision.events import empty
-from spikejax.vision.hough import CircleGrid
-from spikejax.vision.hough import LineGrid
-from spikejax.vision.hough import hough_params
-from spikejax.vision.io import Recording
-from spikejax.vision.io import from_structured
-from spikejax.vision.io import to_structured
-from spikejax.vision.pipe import Pipe
-from spikejax.vision.pipe import find_body
-from spikejax.vision.pipe import find_entry
-from spikejax.vision.pipe import track
-from spikejax.vision.pipe import track_params
+from spikejax.vision.events import Events, compact, empty
+from spikejax.vision.hough import CircleGrid, LineGrid, hough_params
+from spikejax.vision.io import Recording, from_structured, to_structured
+from spikejax.vision.pipe import Pipe, find_body, find_entry, track, track_params
 
 __all__ = [
     "Events",

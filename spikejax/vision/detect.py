@@ -32,8 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spikejax.errors import UserError
-from spikejax.vision import hough
-from spikejax.vision import io
+from spikejax.vision import hough, io
 from spikejax.vision import pipe as pp
 from spikejax.vision.events import Events
 
@@ -91,7 +90,9 @@ def detector_params(
     body = pp.BodyParams() if body is None else body
     return DetectorParams(
         line=hough.hough_params(v_th, decay),
-        circle=hough.hough_params(v_th if circle_v_th is None else circle_v_th, decay if circle_decay is None else circle_decay),
+        circle=hough.hough_params(
+            v_th if circle_v_th is None else circle_v_th, decay if circle_decay is None else circle_decay
+        ),
         body=pp.BodyParams(*(jnp.asarray(v, jnp.float32) for v in body)),
         entry_min_count=jnp.asarray(entry_min_count, jnp.float32),
     )
@@ -148,23 +149,39 @@ def slot_step(det: Detector, params: DetectorParams, state: DetectorState, event
         line_counts = pp.spike_counts(spikes, 2)
         votes = hough.line_votes(det.line, _flat(events))
         body = pp.find_body(
-            params.body, spikes, jnp.asarray(det.line.thetas(), jnp.float32),
-            jnp.asarray(det.line.rhos(), jnp.float32), t,
+            params.body,
+            spikes,
+            jnp.asarray(det.line.thetas(), jnp.float32),
+            jnp.asarray(det.line.rhos(), jnp.float32),
+            t,
             strength=(jnp.maximum(votes, 0.0), jnp.maximum(-votes, 0.0)),
-            origin=det.line.origin, row=0.5 * det.line.height, k=det.k,
+            origin=det.line.origin,
+            row=0.5 * det.line.height,
+            k=det.k,
         )
     if det.circle is not None:
         circle_state, spikes = _grid_spikes(det, det.circle, params.circle, circle_state, events, times)
         circle_counts = pp.spike_counts(spikes, 3)
         votes = hough.circle_votes(det.circle, _flat(events), signed=False)
         entry = pp.find_entry(
-            circle_counts[0] + circle_counts[1], jnp.asarray(det.circle.radii(), jnp.float32), t,
-            params.entry_min_count, strength=votes,
+            circle_counts[0] + circle_counts[1],
+            jnp.asarray(det.circle.radii(), jnp.float32),
+            t,
+            params.entry_min_count,
+            strength=votes,
         )
     return DetectorState(line_state, circle_state), (body, entry, line_counts, circle_counts)
 
 
-def run(det: Detector, params: DetectorParams, events: Events, times, state: DetectorState | None = None, *, keep_counts: bool = False):
+def run(
+    det: Detector,
+    params: DetectorParams,
+    events: Events,
+    times,
+    state: DetectorState | None = None,
+    *,
+    keep_counts: bool = False,
+):
     """`slot_step` over slots, as a ``lax.scan`` (one stream; ``vmap`` adds streams).
 
     Args:
@@ -217,14 +234,23 @@ class Detections(NamedTuple):
     def table(self) -> list[dict]:
         """The valid detections in time order: t, kind, theta (deg), width, pos, distance, offset, control."""
         rows = []
-        for pipes, est, kind in ((self.bodies, self.body_estimates, "body"), (self.entries, self.entry_estimates, "entry")):
+        for pipes, est, kind in (
+            (self.bodies, self.body_estimates, "body"),
+            (self.entries, self.entry_estimates, "entry"),
+        ):
             for i in np.flatnonzero(pipes.valid):
                 rows.append(
                     dict(
-                        t=float(pipes.t[i]), kind=kind, theta_deg=math.degrees(float(pipes.theta[i])),
-                        width_px=float(pipes.width[i]), pos_px=float(pipes.pos[i]), row_px=float(pipes.row[i]),
-                        distance_m=float(est.distance[i]), offset_m=float(est.offset[i]),
-                        control=int(est.control[i]), score=float(pipes.score[i]),
+                        t=float(pipes.t[i]),
+                        kind=kind,
+                        theta_deg=math.degrees(float(pipes.theta[i])),
+                        width_px=float(pipes.width[i]),
+                        pos_px=float(pipes.pos[i]),
+                        row_px=float(pipes.row[i]),
+                        distance_m=float(est.distance[i]),
+                        offset_m=float(est.offset[i]),
+                        control=int(est.control[i]),
+                        score=float(pipes.score[i]),
                     )
                 )
         return sorted(rows, key=lambda r: (r["t"], r["kind"]))

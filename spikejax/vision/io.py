@@ -119,9 +119,7 @@ def _polarity(p: np.ndarray) -> np.ndarray:
     unknown = (p != -1) & (p != 0) & (p != 1)
     if unknown.any():
         i = _first(unknown)
-        raise UserError(
-            f"unknown polarity encoding: p={p[i]} at event {i}; expected bool, 0/1 or -1/+1"
-        )
+        raise UserError(f"unknown polarity encoding: p={p[i]} at event {i}; expected bool, 0/1 or -1/+1")
     negative, zero = p == -1, p == 0
     if negative.any() and zero.any():
         raise UserError(
@@ -180,9 +178,7 @@ def normalize(events: np.ndarray, sensor_size: tuple[int, int] = DVS128) -> np.n
         bad = (values < 0) | (values >= size)
         if bad.any():
             i = _first(bad)
-            raise UserError(
-                f"{name}={values[i]} at event {i} is outside the {width}x{height} sensor"
-            )
+            raise UserError(f"{name}={values[i]} at event {i} is outside the {width}x{height} sensor")
         out[name] = values
     t = _integral("t", events["t"])
     back = np.diff(t) < 0
@@ -277,8 +273,10 @@ def to_structured(events: Events, *, t0: int = 0, polarity: str = "signed") -> n
         nearest microsecond) and ``p``, in slot order.
     """
     if np.ndim(events.x) not in (1, 2):
-        raise UserError(f"to_structured takes one stream, as (capacity,) or (slots, capacity) arrays; "
-                        f"got event arrays of shape {np.shape(events.x)}")
+        raise UserError(
+            f"to_structured takes one stream, as (capacity,) or (slots, capacity) arrays; "
+            f"got event arrays of shape {np.shape(events.x)}"
+        )
     if polarity not in ("signed", "bool"):
         raise UserError(f"polarity must be 'signed' or 'bool', not {polarity!r}")
     keep = np.asarray(events.valid, bool).reshape(-1)
@@ -373,9 +371,7 @@ def _from_npz(npz) -> tuple[np.ndarray, tuple[int, int] | None]:
     structured = [k for k in npz.files if npz[k].dtype.names is not None]
     if len(structured) == 1:
         return npz[structured[0]], stated
-    raise UserError(
-        f"expected arrays x, y, t, p or one structured array; found {', '.join(sorted(keys)) or 'nothing'}"
-    )
+    raise UserError(f"expected arrays x, y, t, p or one structured array; found {', '.join(sorted(keys)) or 'nothing'}")
 
 
 def _read_aedat4(path: Path) -> tuple[np.ndarray, tuple[int, int]]:

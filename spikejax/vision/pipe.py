@@ -455,7 +455,9 @@ class Estimate(NamedTuple):
 
 def track_init(interval: int = 10) -> TrackState:
     """An empty history for Eq. (9) over ``interval`` detections (10 in the paper)."""
-    return TrackState(jnp.zeros((interval,), jnp.float32), jnp.zeros((interval,), jnp.float32), jnp.zeros((), jnp.int32))
+    return TrackState(
+        jnp.zeros((interval,), jnp.float32), jnp.zeros((interval,), jnp.float32), jnp.zeros((), jnp.int32)
+    )
 
 
 def track_step(
@@ -488,7 +490,9 @@ def track_step(
     d_grown = jnp.where(state.count >= interval, d_grown, 0.0)
     distance = jnp.where(pipe.valid, jnp.where(known, d_known, d_grown), 0.0)
     p_off = pipe_offset(distance, pipe.pos, params.center, params.focal)
-    c_off = camera_offset(head_angle, head_velocity, params.swing_amplitude, params.swing_ratio, params.swing_phase, params.omega)
+    c_off = camera_offset(
+        head_angle, head_velocity, params.swing_amplitude, params.swing_ratio, params.swing_phase, params.omega
+    )
     offset = jnp.where(pipe.valid, p_off + c_off, 0.0)
     estimate = Estimate(
         distance=distance,

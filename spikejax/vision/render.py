@@ -141,8 +141,11 @@ def spheres(center, radius, brightness) -> Spheres:
     """Spheres from array-likes; a single sphere may be given unbatched (``center`` of shape (3,))."""
     center = jnp.asarray(center, jnp.float32).reshape(-1, 3)
     n = center.shape[0]
-    return Spheres(center, jnp.broadcast_to(jnp.asarray(radius, jnp.float32), (n,)),
-                   jnp.broadcast_to(jnp.asarray(brightness, jnp.float32), (n,)))
+    return Spheres(
+        center,
+        jnp.broadcast_to(jnp.asarray(radius, jnp.float32), (n,)),
+        jnp.broadcast_to(jnp.asarray(brightness, jnp.float32), (n,)),
+    )
 
 
 def no_spheres() -> Spheres:
@@ -156,17 +159,27 @@ def no_cylinders() -> Cylinders:
 
 def standing_cylinder(x, y, radius, height, brightness=0.1, inner_brightness=0.05, base=0.0) -> Cylinders:
     """One vertical pipe standing on the ground at ``(x, y)``, ``height`` tall."""
-    return Cylinders(jnp.asarray([[x, y, base + 0.5 * height]], jnp.float32), jnp.asarray([[0.0, 0.0, 1.0]]),
-                     jnp.asarray([radius], jnp.float32), jnp.asarray([0.5 * height], jnp.float32),
-                     jnp.asarray([brightness], jnp.float32), jnp.asarray([inner_brightness], jnp.float32))
+    return Cylinders(
+        jnp.asarray([[x, y, base + 0.5 * height]], jnp.float32),
+        jnp.asarray([[0.0, 0.0, 1.0]]),
+        jnp.asarray([radius], jnp.float32),
+        jnp.asarray([0.5 * height], jnp.float32),
+        jnp.asarray([brightness], jnp.float32),
+        jnp.asarray([inner_brightness], jnp.float32),
+    )
 
 
 def lying_cylinder(center, yaw, radius, length, brightness=0.1, inner_brightness=0.05) -> Cylinders:
     """One horizontal pipe centred at ``center`` (3,), its axis at angle ``yaw`` from the world x axis."""
     axis = jnp.stack([jnp.cos(yaw), jnp.sin(yaw), 0.0 * yaw])[None].astype(jnp.float32)
-    return Cylinders(jnp.asarray(center, jnp.float32).reshape(1, 3), axis, jnp.asarray([radius], jnp.float32),
-                     jnp.asarray([0.5 * length], jnp.float32), jnp.asarray([brightness], jnp.float32),
-                     jnp.asarray([inner_brightness], jnp.float32))
+    return Cylinders(
+        jnp.asarray(center, jnp.float32).reshape(1, 3),
+        axis,
+        jnp.asarray([radius], jnp.float32),
+        jnp.asarray([0.5 * length], jnp.float32),
+        jnp.asarray([brightness], jnp.float32),
+        jnp.asarray([inner_brightness], jnp.float32),
+    )
 
 
 def concat_cylinders(*cyls: Cylinders) -> Cylinders:
@@ -289,8 +302,9 @@ def _world_directions(camera: Camera, rot) -> jax.Array:
     """The camera's ray directions (`ray_directions`) rotated into the world frame, ``(h, w, 3)``."""
     local = _local_directions(camera)
     rot = jnp.asarray(rot, jnp.float32)
-    return jnp.stack([local[..., 0] * rot[k, 0] + local[..., 1] * rot[k, 1] + local[..., 2] * rot[k, 2]
-                      for k in range(3)], axis=-1)
+    return jnp.stack(
+        [local[..., 0] * rot[k, 0] + local[..., 1] * rot[k, 1] + local[..., 2] * rot[k, 2] for k in range(3)], axis=-1
+    )
 
 
 def render(scene: Scene, cam_pos, rot, camera: Camera = Camera()) -> jax.Array:

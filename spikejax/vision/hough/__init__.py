@@ -63,16 +63,8 @@ import jax
 
 from spikejax.vision.events import Events
 from spikejax.vision.hough import _fast
-from spikejax.vision.hough.grids import CircleGrid
-from spikejax.vision.hough.grids import Grid
-from spikejax.vision.hough.grids import LineGrid
-from spikejax.vision.hough.grids import check_grid
-from spikejax.vision.hough.grids import line_table
-from spikejax.vision.hough.grids import ring_offsets
-from spikejax.vision.hough.neuron import HoughParams
-from spikejax.vision.hough.neuron import HoughState
-from spikejax.vision.hough.neuron import hough_params
-from spikejax.vision.hough.neuron import init
+from spikejax.vision.hough.grids import CircleGrid, Grid, LineGrid, check_grid, line_table, ring_offsets
+from spikejax.vision.hough.neuron import HoughParams, HoughState, hough_params, init
 
 __all__ = [
     "LineGrid",
