@@ -17,8 +17,16 @@ inhibition -- in both modes, ``jax.jit(jax.vmap(...))`` over a batch of streams
 (one time slot per frame): :func:`spikejax.vision.hough.sync_run` on the paper's
 180 x 180 line grid and 64 x 128 x 128 circle grid, and
 :func:`spikejax.vision.hough.async_run` event by event on the line grid.
-Compile time (first call) is reported apart from run time (the median of
-repeated calls after it). Frames/s and events/s count every stream of the batch.
+Compile time (``lower(...).compile()``) is reported apart from run time (the
+best of ``--repeats`` runs, every implementation timed once a round,
+`spikejax.benchmarking.interleaved`). Frames/s and events/s count every
+stream of the batch. Every ratio is quoted one core against one and all cores
+against all: the peers run one frame after another in one process, and, with
+several cores, in a pool of one process a core (each with the same frames,
+started together), as their users would spread frames over cores; spikejax
+runs each batch on one CPU device and split over all of them
+(`spikejax.devices.shard_batch`). ``x_peer`` is a row's rate over its peer's
+(skimage ``hough_line``, ``hough_circle``, the NumPy loop) on as many cores.
 
 Formulations measured (ratios in ``docs/ARCHITECTURE.md``, "Hough formulations
 (measured)"; ``benchmarks/hough_formulations.py`` measures them side by side),
@@ -57,9 +65,8 @@ and why these won:
 from __future__ import annotations
 
 import argparse
-import csv
-import os
-import platform
+import contextlib
+import importlib.util
 import time
 from pathlib import Path
 
@@ -67,12 +74,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from spikejax.benchmarking import JaxRun
+from spikejax.benchmarking import Processes
+from spikejax.benchmarking import add_ratios
+from spikejax.benchmarking import compile_ahead
+from spikejax.benchmarking import cores_label
+from spikejax.benchmarking import interleaved
+from spikejax.benchmarking import machine_banner
+from spikejax.benchmarking import plot_rows
+from spikejax.benchmarking import write_csv
+from spikejax.commands import Command
+from spikejax.commands import count
 from spikejax.devices import cpu_devices_for_run
 from spikejax.devices import shard_batch
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
 
-__all__ = ["main", "frames", "mode_difference", "TABLE1"]
+__all__ = ["PEERS", "TABLE1", "command", "frames", "mode_difference", "run"]
 
 # Table 1 of the snake pipe-tracking paper: frames/s of the whole pipe tracker.
 TABLE1 = [
@@ -84,7 +102,7 @@ TABLE1 = [
 CAPACITY = 2304
 N_FRAMES = 8
 COLUMNS = ["shape", "implementation", "mode", "batch", "frames", "events", "compile_s", "run_s", "frames_per_s",
-           "events_per_s", "device", "devices"]
+           "events_per_s", "device", "devices", "cores", "parallel", "peer", "x_peer"]
 
 
 def frames(shape: str, n: int = N_FRAMES) -> tuple:
@@ -110,64 +128,69 @@ def frames(shape: str, n: int = N_FRAMES) -> tuple:
     return events, images
 
 
-def _time(fn, repeats: int, min_s: float = 0.3) -> float:
-    """Median seconds of one call, over ``repeats`` calls (more while under ``min_s`` in all)."""
-    times = []
-    start = time.perf_counter()
-    while len(times) < repeats or time.perf_counter() - start < min_s:
-        t = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t)
-        if len(times) >= 1000:
-            break
-    return float(np.median(times))
+class _PeerRun:
+    """One timed pass of a peer over a stream's frames, one frame at a time (a `Processes` timer).
+
+    ``name`` is one of `PEERS`; ``frames_in`` the binary images (or, for the
+    NumPy loop, the events of one stream, NumPy arrays). ``info`` is
+    ``(frames, events)`` of one pass.
+    """
+
+    def __init__(self, name: str, frames_in, events_per_frame: float):
+        if name == "NumPy per-event loop":
+            self._fn = _numpy_async(frames_in)
+            self.info = (1, float(self._fn.n_events))
+            return
+        if name.startswith("skimage"):
+            from skimage.transform import hough_circle, hough_line
+
+            thetas, radii = hough.LineGrid().skimage_thetas(), np.arange(1, 65)
+            one = (lambda im: hough_line(im, thetas)) if "line" in name else (lambda im: hough_circle(im, radii))
+        else:
+            import cv2
+
+            cv2.setNumThreads(1)
+            frames_in = [(im * 255).astype(np.uint8) for im in frames_in]
+            if "Lines" in name:
+                one = lambda im: cv2.HoughLines(im, 1, np.pi / 180, 60)  # noqa: E731
+            else:
+                one = lambda im: cv2.HoughCircles(  # noqa: E731
+                    im, cv2.HOUGH_GRADIENT, dp=1, minDist=8, param1=100, param2=20, minRadius=1, maxRadius=64)
+        images = list(frames_in)
+        self.info = (len(images), float(events_per_frame) * len(images))
+
+        def run():
+            for im in images:
+                one(im)
+
+        self._fn = run
+
+    def __call__(self) -> float:
+        t0 = time.perf_counter()
+        self._fn()
+        return time.perf_counter() - t0
 
 
-def _row(shape, impl, mode, batch, n_frames, n_events, compile_s, run_s, device="cpu", devices=1):
-    return dict(shape=shape, implementation=impl, mode=mode, batch=batch, frames=n_frames, events=n_events,
-                compile_s=compile_s, run_s=run_s, frames_per_s=n_frames / run_s, events_per_s=n_events / run_s,
-                device=device, devices=devices)
+# (shape, implementation, mode) of each peer.
+PEERS = (
+    ("line", "skimage hough_line", "per frame"),
+    ("circle", "skimage hough_circle (64 radii)", "per frame"),
+    ("line", "OpenCV HoughLines", "per frame"),
+    ("circle", "OpenCV HoughCircles", "per frame"),
+    ("line", "NumPy per-event loop", "async"),
+)
+# The peer every row's ratio is taken to, by (shape, mode).
+RATIO_PEER = {("line", "sync"): "skimage hough_line", ("line", "per frame"): "skimage hough_line",
+              ("circle", "sync"): "skimage hough_circle", ("circle", "per frame"): "skimage hough_circle",
+              ("line", "async"): "NumPy per-event loop"}
 
 
-def _peer(shape, impl, fn, images, counts, repeats):
-    i = [0]
+def _numpy_async(events):
+    """Alg. 1 event by event in NumPy on the 180 x 180 grid (the first stream of ``events``): the plain way.
 
-    def one():
-        k = i[0] % len(images)
-        i[0] += 1
-        return fn(images[k])
-
-    run_s = _time(one, repeats * len(images))
-    return _row(shape, impl, "per frame", 1, 1, float(np.mean(counts)), None, run_s)
-
-
-def _peers(line_images, circle_images, line_counts, circle_counts, line_events, repeats):
-    from skimage.transform import hough_circle, hough_line
-
-    rows = []
-    thetas = hough.LineGrid().skimage_thetas()
-    rows.append(_peer("line", "skimage hough_line", lambda im: hough_line(im, thetas), line_images, line_counts, repeats))
-    radii = np.arange(1, 65)
-    rows.append(_peer("circle", "skimage hough_circle (64 radii)", lambda im: hough_circle(im, radii), circle_images,
-                      circle_counts, 1))
-    try:
-        import cv2
-    except ImportError:  # pragma: no cover - OpenCV is a bench extra
-        cv2 = None
-    if cv2 is not None:
-        cv2.setNumThreads(1)
-        u8 = lambda ims: [(im * 255).astype(np.uint8) for im in ims]
-        rows.append(_peer("line", "OpenCV HoughLines", lambda im: cv2.HoughLines(im, 1, np.pi / 180, 60),
-                          u8(line_images), line_counts, repeats))
-        rows.append(_peer("circle", "OpenCV HoughCircles", lambda im: cv2.HoughCircles(
-            im, cv2.HOUGH_GRADIENT, dp=1, minDist=8, param1=100, param2=20, minRadius=1, maxRadius=64),
-            u8(circle_images), circle_counts, repeats))
-    rows.append(_numpy_async(line_events, repeats))
-    return rows
-
-
-def _numpy_async(events, repeats):
-    """Alg. 1 event by event in NumPy on the 180 x 180 grid (one stream): the plain way."""
+    Returns a timer: each call runs the loop over the stream once and returns
+    its seconds; ``n_events`` is the stream's events.
+    """
     grid = hough.LineGrid()
     table = hough.line_table(grid)
     v_th, decay = 8.0, 50.0
@@ -195,8 +218,13 @@ def _numpy_async(events, repeats):
                 v[nk[inside] * grid.n_rho + nj[inside]] = 0.0
         return spikes
 
-    run_s = _time(run, 1, min_s=0.0)
-    return _row("line", "NumPy per-event loop", "async", 1, 1, n, None, run_s)
+    def timer() -> float:
+        t0 = time.perf_counter()
+        run()
+        return time.perf_counter() - t0
+
+    timer.n_events = n
+    return timer
 
 
 def _batched(tree, batch):
@@ -207,32 +235,27 @@ def _on(devices: int) -> str:
     return "" if devices == 1 else f", {devices} devices"
 
 
-def _spikejax_sync(shape, grid, events, batch, repeats, device, devices=1):
+def _spikejax(shape: str, mode: str, events, batch: int, devices: int):
+    """A spikejax row's compiled run and its row: ``(JaxRun, row without run_s)``."""
     params = hough.hough_params(8.0, 50.0)
-    n_slots = events.x.shape[0]
-    times = jnp.arange(1, n_slots + 1, dtype=jnp.float32) * 0.01
-    fn = shard_batch(jax.vmap(lambda e: hough.sync_run(params, grid, e, times)[1]), jax.devices()[:devices])
+    grid = hough.LineGrid() if shape == "line" else hough.CircleGrid()
+    if mode == "sync":
+        n_slots = events.x.shape[0]
+        times = jnp.arange(1, n_slots + 1, dtype=jnp.float32) * 0.01
+        one = lambda e: hough.sync_run(params, grid, e, times)[1]  # noqa: E731
+        n_frames, n_events = n_slots * batch, float(events.count().sum()) * batch
+    else:
+        events = jax.tree.map(lambda a: a[:1], events)
+        one = lambda e: hough.async_run(params, grid, e)  # noqa: E731
+        n_frames, n_events = batch, float(events.count()[0]) * batch
+    fn = shard_batch(jax.vmap(one), jax.devices()[:devices])
     streams = _batched(events, batch)
-    t = time.perf_counter()
-    jax.block_until_ready(fn(streams))
-    compile_s = time.perf_counter() - t
-    run_s = _time(lambda: fn(streams), repeats)
-    n_events = float(events.count().sum()) * batch
-    return _row(shape, f"spikejax {type(grid).__name__} (votes + LIF + inhibition){_on(devices)}", "sync", batch,
-                n_slots * batch, n_events, compile_s, run_s, device, devices)
-
-
-def _spikejax_async(grid, events, batch, repeats, device, devices=1):
-    params = hough.hough_params(8.0, 50.0)
-    fn = shard_batch(jax.vmap(lambda e: hough.async_run(params, grid, e)), jax.devices()[:devices])
-    streams = _batched(jax.tree.map(lambda a: a[:1], events), batch)
-    t = time.perf_counter()
-    jax.block_until_ready(fn(streams))
-    compile_s = time.perf_counter() - t
-    run_s = _time(lambda: fn(streams), repeats, min_s=0.0)
-    n_events = float(events.count()[0]) * batch
-    return _row("line", f"spikejax LineGrid (votes + LIF + inhibition){_on(devices)}", "async", batch, batch, n_events,
-                compile_s, run_s, device, devices)
+    compiled, compile_s = compile_ahead(fn, streams)
+    row = dict(shape=shape, implementation=f"spikejax {type(grid).__name__} (votes + LIF + inhibition){_on(devices)}",
+               mode=mode, batch=batch, frames=n_frames, events=n_events, compile_s=compile_s,
+               device=jax.devices()[0].platform, devices=devices, cores=devices,
+               parallel=cores_label(devices, "device"))
+    return JaxRun(compiled, streams), row
 
 
 def mode_difference(events, params=None) -> dict:
@@ -255,6 +278,7 @@ def mode_difference(events, params=None) -> dict:
 
 
 def _batches(largest: int) -> list[int]:
+    """1, 4, 16, ... up to ``largest``, and ``largest`` itself."""
     out, b = [], 1
     while b <= largest:
         out.append(b)
@@ -264,53 +288,38 @@ def _batches(largest: int) -> list[int]:
     return out
 
 
-def _plot(rows, path: Path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    colours = iter(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4)
-    for ax, shape in zip(axes, ("line", "circle")):
-        keys = dict.fromkeys((r["implementation"], r["mode"]) for r in rows if r["shape"] == shape)
-        for impl, mode in keys:
-            sel = [r for r in rows if r["shape"] == shape and (r["implementation"], r["mode"]) == (impl, mode)]
-            colour = next(colours)
-            if impl.startswith("spikejax"):
-                ax.plot([r["batch"] for r in sel], [r["frames_per_s"] for r in sel], "o-", color=colour,
-                        label=f"{impl}, {mode}")
-            else:
-                ax.axhline(sel[0]["frames_per_s"], ls="--", lw=1, color=colour, label=f"{impl} (one frame at a time)")
-        ax.axhline(40.74 if shape == "line" else 22.35, color="k", lw=0.8, ls=":", label="paper's best (GPU, Table 1)")
-        ax.set(xscale="log", yscale="log", xlabel="streams in the batch", ylabel="frames / s",
-               title=f"{shape} detection, 128 x 128 event frames")
-        ax.legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--trials", type=count, default=None,
+                        help="largest batch of streams (default 1024; circles stop at 64, async at 256)")
+    parser.add_argument("--out", default=None, help="write hough.csv and hough.png here")
+    parser.add_argument("--repeats", type=count, default=None, help="timed runs per row, the best kept (default 5)")
+    parser.add_argument("--cpu-devices", type=count, default=None,
+                        help="CPU devices JAX presents (default: one per core); also the peers' processes")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def main(args: argparse.Namespace) -> int:
-    """``spikejax bench hough``: print the table and write ``hough.csv`` and ``hough.png`` to ``--out``.
+def run(*, trials: int | None = None, out: str | None = None, repeats: int | None = None,
+        cpu_devices: int | None = None, no_progress: bool = False) -> int:
+    """``spikejax bench hough``: print the table and write ``hough.csv`` and ``hough.png`` to ``out``.
 
-    Reads ``args.trials`` as the largest batch of streams (default 1024; the
-    circle grid, 4 MB of state a stream, stops at 64 streams, the asynchronous
-    mode at 256) and ``args.out`` (optional). ``args.repeats`` (optional) sets
-    the timed calls per row (default 5). ``args.cpu_devices`` (default: the
-    machine's cores) is the number of CPU devices JAX presents; with more than
-    one device, every spikejax row from that batch on is also run with the
-    streams split over all devices (`spikejax.devices.shard_batch`).
+    Args:
+        trials: the largest batch of streams (default 1024; the circle grid, 4 MB
+            of state a stream, stops at 64 streams, the asynchronous mode at 256).
+        out: a directory for the table and figure (None: print only).
+        repeats: timed runs per row, interleaved, the best kept (default 5).
+        cpu_devices: CPU devices JAX presents (default: one per core). With more
+            than one, every spikejax row from that batch on is also run with the
+            streams split over all devices, and every peer also runs in that
+            many processes at once.
+        no_progress: hide the progress bar.
     """
-    largest = int(getattr(args, "trials", None) or 1024)
-    if largest < 1:
-        raise UserError(f"--trials (the largest batch of streams) must be >= 1, not {largest}")
-    repeats = int(getattr(args, "repeats", None) or 5)
-    n_dev = cpu_devices_for_run(getattr(args, "cpu_devices", None))
-    device = jax.devices()[0].platform
-    splits = lambda b: [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"{n_dev} x {device}, jax {jax.__version__}")
+    largest = 1024 if trials is None else trials
+    repeats = 5 if repeats is None else repeats
+    if largest < 1 or repeats < 1:
+        raise UserError(f"--trials and --repeats must be >= 1, not {largest} and {repeats}")
+    n_dev = cpu_devices_for_run(cpu_devices)
+    splits = lambda b: [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])  # noqa: E731
+    print(machine_banner(n_dev))
     line_events, line_images = frames("line")
     circle_events, circle_images = frames("circle")
     line_counts = np.asarray(line_events.count())
@@ -320,58 +329,93 @@ def main(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    jobs = [lambda: _peers(line_images, circle_images, line_counts, circle_counts, line_events, repeats)]
-    # Two slots a stream for circles: the circle grid's run time does not depend on the events.
-    two = jax.tree.map(lambda a: a[:2], circle_events)
-    for b in _batches(largest):
-        for d in splits(b):
-            jobs.append(lambda b=b, d=d: [_spikejax_sync("line", hough.LineGrid(), line_events, b, repeats, device, d)])
-    for b in _batches(min(largest, 64)):
-        for d in splits(b):
-            jobs.append(lambda b=b, d=d: [_spikejax_sync("circle", hough.CircleGrid(), two, b, repeats, device, d)])
-    for b in _batches(min(largest, 256)):
-        for d in splits(b):
-            jobs.append(lambda b=b, d=d: [_spikejax_async(hough.LineGrid(), line_events, b, repeats, device, d)])
-    rows = []
-    for job in tqdm(jobs, desc="hough bench", disable=getattr(args, "no_progress", False)):
-        rows.extend(job())
+    numpy_events = jax.tree.map(np.asarray, jax.tree.map(lambda a: a[:1], line_events))
+    with contextlib.ExitStack() as stack:
+        runs, rows = {}, {}
+        for shape, name, mode in PEERS:
+            if name.startswith("OpenCV") and importlib.util.find_spec("cv2") is None:  # pragma: no cover - extra
+                continue
+            data = numpy_events if mode == "async" else (line_images if shape == "line" else circle_images)
+            per_frame = float(np.mean(line_counts if shape == "line" else circle_counts))
+            for p in [1] + ([n_dev] if n_dev > 1 else []):
+                runner = stack.enter_context(Processes(_PeerRun, name, data, per_frame, processes=p))
+                units, events = runner.info()[0]
+                impl = name + ("" if p == 1 else f", {p} processes")
+                runs[impl, mode] = runner
+                rows[impl, mode] = dict(shape=shape, implementation=impl, mode=mode, batch=p, frames=units * p,
+                                        events=events * p, compile_s=None, device="cpu", devices=1, cores=p,
+                                        parallel=cores_label(p, "process"))
+        # Two slots a stream for circles: the circle grid's run time does not depend on the events.
+        two = jax.tree.map(lambda a: a[:2], circle_events)
+        jobs = [("line", "sync", line_events, b) for b in _batches(largest)]
+        jobs += [("circle", "sync", two, b) for b in _batches(min(largest, 64))]
+        jobs += [("line", "async", line_events, b) for b in _batches(min(largest, 256))]
+        for shape, mode, events, b in tqdm(jobs, desc="hough bench: compiling", disable=no_progress):
+            for d in splits(b):
+                runner, row = _spikejax(shape, mode, events, b, d)
+                runs[row["implementation"], mode, b] = runner
+                rows[row["implementation"], mode, b] = row
+        bar = tqdm(total=len(runs) * repeats, desc="hough bench: timing", disable=no_progress)
+        best = interleaved(runs, repeats, progress=lambda _: bar.update())
+        bar.close()
+    rows = list(rows.values())
+    for row, run_s in zip(rows, best.values()):
+        row.update(run_s=run_s, frames_per_s=row["frames"] / run_s, events_per_s=row["events"] / run_s)
+    add_ratios(rows, "x_peer", "frames_per_s",
+               lambda p, r: p["implementation"].startswith(RATIO_PEER[r["shape"], r["mode"]]))
+    for r in rows:  # async: a frame is a stream's one slot, the peer's too, so the ratio is that of events/s
+        r["peer"] = RATIO_PEER[r["shape"], r["mode"]]
 
-    _print(rows)
+    _print(rows, n_dev)
     diff = mode_difference(line_events)
     print(f"\nsync vs async on the line frames ({diff['slots']} slots of ~{line_counts.mean():.0f} events, "
           f"v_th = 8, decay = 50/s): {diff['sync_spikes']} sync spikes, {diff['async_spikes']} async spikes, "
           f"{100 * diff['shared']:.0f} % of the async spikes also in sync")
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        with open(out / "hough.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=COLUMNS)
-            writer.writeheader()
-            writer.writerows(rows)
+    if out:
+        out = Path(out)
+        write_csv(out / "hough.csv", rows, COLUMNS)
         _plot(rows, out / "hough.png")
         print(f"wrote {out / 'hough.csv'} and {out / 'hough.png'}")
     return 0
 
 
-def _print(rows):
-    print(f"\n{'shape':7s} {'implementation':58s} {'mode':9s} {'batch':>5s} {'compile s':>9s} {'frames/s':>10s} "
-          f"{'M events/s':>10s}")
+def _plot(rows: list[dict], path: Path) -> None:
+    paper = {"line": 40.74, "circle": 22.35}
+    plot_rows(rows, path, x="batch", y="frames_per_s", panel="shape", size=(11, 4.2),
+              series=lambda r: (f"{r['implementation']}, {r['mode']}" if r["implementation"].startswith("spikejax")
+                                else f"{r['implementation']} (one frame at a time)"),
+              flat=lambda r: not r["implementation"].startswith("spikejax"),
+              lines=lambda shape: [(paper[shape], "paper's best (GPU, Table 1)")],
+              xlabel="streams in the batch", ylabel="frames / s",
+              title=lambda shape: f"{shape} detection, 128 x 128 event frames")
+
+
+def _print(rows: list[dict], n_dev: int) -> None:
+    print(f"\n{'shape':7s} {'implementation':58s} {'mode':9s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} "
+          f"{'frames/s':>10s} {'M events/s':>10s} {'x peer':>7s}")
     for r in rows:
         c = "" if r["compile_s"] is None else f"{r['compile_s']:.1f}"
-        print(f"{r['shape']:7s} {r['implementation']:58s} {r['mode']:9s} {r['batch']:5d} {c:>9s} "
-              f"{r['frames_per_s']:10.1f} {r['events_per_s'] / 1e6:10.3f}")
-    best = lambda shape, mode: max((r for r in rows if r["shape"] == shape and r["mode"] == mode
-                                    and r["implementation"].startswith("spikejax")), key=lambda r: r["events_per_s"])
-    peer = lambda name: next(r for r in rows if r["implementation"].startswith(name))
-    line, circle, asyn = best("line", "sync"), best("circle", "sync"), best("line", "async")
-    where = lambda r: f"batch {r['batch']}, {r['devices']} device" + ("s" if r["devices"] > 1 else "")
-    print("\nmeasured in this run (ratios to the peer on the same frames; the best row):")
-    print(f"  line, sync:    {line['frames_per_s']:.0f} frames/s at {where(line)} = "
-          f"{line['frames_per_s'] / peer('skimage hough_line')['frames_per_s']:.2f} x skimage hough_line")
-    print(f"  circle, sync:  {circle['frames_per_s']:.1f} frames/s at {where(circle)} = "
-          f"{circle['frames_per_s'] / peer('skimage hough_circle')['frames_per_s']:.2f} x skimage hough_circle")
-    print(f"  line, async:   {asyn['events_per_s'] / 1e6:.3f} M events/s at {where(asyn)} = "
-          f"{asyn['events_per_s'] / peer('NumPy per-event')['events_per_s']:.1f} x the NumPy per-event loop")
+        print(f"{r['shape']:7s} {r['implementation']:58s} {r['mode']:9s} {r['batch']:5d} {r['cores']:5d} {c:>9s} "
+              f"{r['frames_per_s']:10.1f} {r['events_per_s'] / 1e6:10.3f} {r['x_peer']:7.2f}")
+    print("(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; "
+          "async in events/s)")
+    print("\nmeasured in this run (ratios to the peer on the same frames and cores; the best row):")
+    for cores in sorted({1, n_dev}):
+        for shape, mode, unit in (("line", "sync", "frames"), ("circle", "sync", "frames"), ("line", "async", "events")):
+            sel = [r for r in rows if r["shape"] == shape and r["mode"] == mode and r["cores"] == cores
+                   and r["implementation"].startswith("spikejax")]
+            if not sel:
+                continue
+            best = max(sel, key=lambda r: r["x_peer"])
+            rate = (f"{best['frames_per_s']:.1f} frames/s" if unit == "frames"
+                    else f"{best['events_per_s'] / 1e6:.3f} M events/s")
+            print(f"  {shape}, {mode}, {cores} core{'s' if cores > 1 else ''}: {rate} at batch {best['batch']} = "
+                  f"{best['x_peer']:.2f} x {best['peer']} ({best['parallel']} against "
+                  f"{cores_label(cores, 'process')})")
     print("\nTable 1 of the paper (whole pipe tracker, frames/s):")
     for case, hw, cpu, gpu in TABLE1:
         print(f"  {case:24s} {hw:34s} CPU {cpu:5.2f}  GPU {gpu:6.2f}")
+
+
+command = Command(help="spiking Hough detectors against scikit-image and OpenCV", add_arguments=_add_arguments,
+                  run=run, description=__doc__.splitlines()[0])
