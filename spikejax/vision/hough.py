@@ -46,7 +46,7 @@ inhibition of a spike acts at the end of the slot rather than on the later
 events of the slot. With at most one event per slot they agree exactly.
 
 How it is computed (each choice measured against the alternatives on a 2-core
-CPU, see `spikejax.commands.bench_hough` and ``docs/ARCHITECTURE.md``): line
+CPU, see :mod:`spikejax.vision.bench_hough` and ``docs/ARCHITECTURE.md``): line
 votes are scatter-adds of each event's ``n_theta`` cells, read from a static
 (pixel, angle) -> cell table (:func:`line_table`, gathered as uint16) into an
 int32 accumulator, a few hundred events at a time so that the gathered cells
