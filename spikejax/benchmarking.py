@@ -157,20 +157,23 @@ class Processes:
     dict). Each call of the `Processes` object asks every process for one run;
     they wait at a barrier and start together, and the call returns the
     slowest process's seconds, so ``processes`` runs in that time is the
-    aggregate throughput of that many cores. A process alone has no thread
+    aggregate throughput of that many cores. With ``index_arg``, process ``i``
+    gets the keyword argument ``index_arg=i`` (its share of the work). A process alone has no thread
     pool of another library beside it (XLA's, MuJoCo's, NEST's). Use it as a
     context manager; an exception of ``factory`` (an ImportError of a peer
     that is not installed) is raised by the constructor.
     """
 
-    def __init__(self, factory: Callable, *args: Any, processes: int = 1, **kwargs: Any):
+    def __init__(self, factory: Callable, *args: Any, processes: int = 1, index_arg: str | None = None,
+                 **kwargs: Any):
         context = multiprocessing.get_context("spawn")
         barrier = context.Barrier(processes) if processes > 1 else None
         self.processes = processes
         self._conns, self._procs = [], []
-        for _ in range(processes):
+        for i in range(processes):
             parent, child = context.Pipe()
-            proc = context.Process(target=_serve, args=(child, factory, args, kwargs, barrier), daemon=True)
+            kw = kwargs if index_arg is None else {**kwargs, index_arg: i}
+            proc = context.Process(target=_serve, args=(child, factory, args, kw, barrier), daemon=True)
             proc.start()
             self._conns.append(parent)
             self._procs.append(proc)

@@ -21,7 +21,7 @@ implementations are timed in the same run, at batch sizes 1 to 1024:
   On a CPU only batches up to `MJX_CPU_MAX_BATCH` are timed: batches of 256
   hung intermittently there even in a fresh process.
 
-The closed loops time :class:`robots.snake.env.SnakeEnv`'s ``step`` on the
+The closed loops time `robots.snake.env.SnakeEnv`'s ``step`` on the
 8-shaped track: the gait, the physics, the target's motion, the head camera's
 128 x 128 frame and its frame-difference DVS events, for every snake.
 
@@ -52,10 +52,6 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from robots.snake.env import SnakeEnv
-from robots.snake.gait import default_gait
-from robots.snake.gait import joint_targets
-from robots.snake.physics import make_physics
 from spikejax.benchmarking import Processes
 from spikejax.benchmarking import add_ratios
 from spikejax.benchmarking import compile_ahead
@@ -67,6 +63,10 @@ from spikejax.benchmarking import write_csv
 from spikejax.commands import Command
 from spikejax.commands import count
 from spikejax.errors import UserError
+
+# The snake's modules are imported where they are used: they make JAX arrays when
+# imported, which would start JAX before another bench of ``spikejax bench``
+# (all are loaded to build the command line) presents the CPU as several devices.
 
 __all__ = [
     "BATCHES",
@@ -125,6 +125,10 @@ class CPhysicsRun:
     """
 
     def __init__(self, batch: int, n: int, *, nthread: int = 1):
+        from robots.snake.gait import default_gait
+        from robots.snake.gait import joint_targets
+        from robots.snake.physics import make_physics
+
         phys = make_physics("mujoco")
         self.model, self.phys, self.batch, self.n = phys.mj_model, phys, batch, n
         gait = default_gait()
@@ -176,6 +180,8 @@ def bench_c_physics(batch: int, n: int, *, nthread: int | None = None, repeats: 
 
 def _env_run(backend: str, nthread: int | None = None):
     """The closed loop timed: ``SnakeEnv.step`` (gait, physics, target, head camera, DVS events) in a ``lax.scan``."""
+    from robots.snake.env import SnakeEnv
+
     env = SnakeEnv("eight", backend, **({} if nthread is None else dict(nthread=nthread)))
 
     def run(key, steer, n):
@@ -273,6 +279,8 @@ def run(*, trials: int | None = None, out: str | None = None, quick: bool = Fals
     every = (os.cpu_count() or 1) if threads is None else threads
     backends = ("mujoco",) if quick else ("mujoco", "mjx")
     c_budget = 2_000 if quick else C_BUDGET
+    from robots.snake.physics import make_physics
+
     phys = make_physics("mujoco")
     print(machine_banner(mujoco=mujoco.__version__))
     print(f"snake (17 modules, tuned model): control step {phys.dt * phys.substeps * 1e3:.0f} ms = "
