@@ -43,6 +43,7 @@ __all__ = [
     "JaxRun",
     "Processes",
     "add_ratios",
+    "batch_sizes",
     "compile_ahead",
     "cores_label",
     "interleaved",
@@ -73,6 +74,13 @@ def machine_banner(devices: int | None = None, **versions: str) -> str:
 def cores_label(n: int, unit: str) -> str:
     """``"1 process"``, ``"2 devices"``, ...: the ``parallel`` column of a row."""
     return f"{n} {unit}" + ("" if n == 1 else ("es" if unit.endswith("s") else "s"))
+
+
+def batch_sizes(largest: int | None, sizes: Sequence[int]) -> tuple[int, ...]:
+    """The batch sizes of ``sizes`` up to ``largest``, and ``largest`` itself (None: all of ``sizes``)."""
+    if largest is None:
+        return tuple(sizes)
+    return tuple(sorted({b for b in sizes if b <= largest} | {largest}))
 
 
 def compile_ahead(fn: Callable, *args: Any) -> tuple[Any, float]:

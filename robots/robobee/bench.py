@@ -59,6 +59,7 @@ from robots.robobee.peers import RECORD_EVERY
 from robots.robobee.peers import Brian2FlightRun
 from spikejax.benchmarking import JaxRun
 from spikejax.benchmarking import Processes
+from spikejax.benchmarking import batch_sizes
 from spikejax.benchmarking import compile_ahead
 from spikejax.benchmarking import cores_label
 from spikejax.benchmarking import interleaved
@@ -375,13 +376,6 @@ def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: in
 # ----------------------------------------------------------------- CLI
 
 
-def _batches(trials: int | None) -> tuple[int, ...]:
-    """`BATCHES` up to ``trials`` (and ``trials`` itself), or all of them."""
-    if trials is None:
-        return BATCHES
-    return tuple(sorted({b for b in BATCHES if b <= trials} | {int(trials)}))
-
-
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trials", type=count, default=None,
                         help="the largest batch of flights (default: every batch of 1 .. 4096)")
@@ -434,7 +428,7 @@ def run(*, trials: int | None = None, out: str | None = None, duration: float | 
     brian2_target = "cython" if brian2_target is None else brian2_target
     if repeats < 1:
         raise UserError(f"--repeats must be >= 1, not {repeats}")
-    batches = _batches(trials)
+    batches = batch_sizes(trials, BATCHES)
     print(machine_banner(n_dev))
     hold, segment = flight_steps(duration)
     print(f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "

@@ -77,6 +77,7 @@ import numpy as np
 from spikejax.benchmarking import JaxRun
 from spikejax.benchmarking import Processes
 from spikejax.benchmarking import add_ratios
+from spikejax.benchmarking import batch_sizes
 from spikejax.benchmarking import compile_ahead
 from spikejax.benchmarking import cores_label
 from spikejax.benchmarking import interleaved
@@ -277,15 +278,8 @@ def mode_difference(events, params=None) -> dict:
                 shared=float(both / max(np.count_nonzero(asyn), 1)))
 
 
-def _batches(largest: int) -> list[int]:
-    """1, 4, 16, ... up to ``largest``, and ``largest`` itself."""
-    out, b = [], 1
-    while b <= largest:
-        out.append(b)
-        b *= 4
-    if out[-1] != largest:
-        out.append(largest)
-    return out
+# The batch sizes timed: powers of 4 up to --trials, and --trials itself.
+POWERS_OF_4 = tuple(4**k for k in range(16))
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -347,9 +341,9 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
                                         parallel=cores_label(p, "process"))
         # Two slots a stream for circles: the circle grid's run time does not depend on the events.
         two = jax.tree.map(lambda a: a[:2], circle_events)
-        jobs = [("line", "sync", line_events, b) for b in _batches(largest)]
-        jobs += [("circle", "sync", two, b) for b in _batches(min(largest, 64))]
-        jobs += [("line", "async", line_events, b) for b in _batches(min(largest, 256))]
+        jobs = [("line", "sync", line_events, b) for b in batch_sizes(largest, POWERS_OF_4)]
+        jobs += [("circle", "sync", two, b) for b in batch_sizes(min(largest, 64), POWERS_OF_4)]
+        jobs += [("line", "async", line_events, b) for b in batch_sizes(min(largest, 256), POWERS_OF_4)]
         for shape, mode, events, b in tqdm(jobs, desc="hough bench: compiling", disable=no_progress):
             for d in splits(b):
                 runner, row = _spikejax(shape, mode, events, b, d)
