@@ -183,6 +183,7 @@ class Processes:
             kw = kwargs if index_arg is None else {**kwargs, index_arg: i}
             proc = context.Process(target=_serve, args=(child, factory, args, kw, barrier), daemon=True)
             proc.start()
+            child.close()  # the child's end lives in the child: a process that dies is then an EOFError here
             self._conns.append(parent)
             self._procs.append(proc)
         try:
@@ -194,7 +195,10 @@ class Processes:
     def _gather(self) -> list:
         out = []
         for conn in self._conns:
-            kind, value = conn.recv()
+            try:
+                kind, value = conn.recv()
+            except EOFError:
+                raise RuntimeError("a benchmark process ended unexpectedly") from None
             if kind == "error":
                 raise value
             out.append(value)
