@@ -66,7 +66,6 @@ def run_numpy(duration: float, seed: int, network: int = 0, dtype=np.float64) ->
     return result_row(f"NumPy loop ({np.dtype(dtype).name})", 1, n_steps, 0.0, run_s, counts, margin=margin)
 
 
-
 class NumpyNetworkRun:
     """`run_numpy` as a benchmark timer: each call simulates the network once and returns its seconds.
 
