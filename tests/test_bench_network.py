@@ -39,7 +39,7 @@ def reference(network: int) -> dict:
 
 
 def spikejax_counts(n_networks: int, *, synapses: str = "dense", weight_dtype=jnp.bfloat16, **kw) -> np.ndarray:
-    """Spikes per network and neuron of ``n_networks`` networks as ``jit(vmap(simulate))``, as the benchmark runs them."""
+    """Spikes per network and neuron of ``n_networks`` networks as ``jit(vmap(simulate))``, as the bench runs them."""
     params = delta_network.delta_network_params(delta_network.make_network(SEED), synapses, weight_dtype)
     currents = jnp.asarray(delta_network.input_currents(SEED, n_networks), jnp.float32)
     one = functools.partial(delta_network.simulate, n_steps=delta_network.n_steps_of(DURATION), **kw)

@@ -21,6 +21,7 @@ import math
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -42,6 +43,9 @@ from spikejax.sweep import load_sweep
 from spikejax.sweep import read_results
 from spikejax.sweep import run_sweep
 from spikejax.sweep import trial_key
+
+if TYPE_CHECKING:
+    from robots.hexapod.trial import GaitTrialParams
 
 # The hexapod's modules are imported where they are used: they make JAX arrays
 # when imported, which starts JAX before `run` can present the CPU as several devices.

@@ -395,7 +395,8 @@ def _print(rows: list[dict], n_dev: int) -> None:
           "async in events/s)")
     print("\nmeasured in this run (ratios to the peer on the same frames and cores; the best row):")
     for cores in sorted({1, n_dev}):
-        for shape, mode, unit in (("line", "sync", "frames"), ("circle", "sync", "frames"), ("line", "async", "events")):
+        for shape, mode, unit in (("line", "sync", "frames"), ("circle", "sync", "frames"),
+                                  ("line", "async", "events")):
             sel = [r for r in rows if r["shape"] == shape and r["mode"] == mode and r["cores"] == cores
                    and r["implementation"].startswith("spikejax")]
             if not sel:
