@@ -13,7 +13,7 @@ and the ratio of each round is printed with the median over ``--rounds``.
   ``hough_line`` (frames/s);
 * asynchronous: ``vmap`` of :func:`hough.async_run` over distinct streams (each
   a different order and mirror image of the frames), vs the NumPy per-event
-  loop of :mod:`spikejax.vision.bench_hough` (events/s).
+  loop of `spikejax.commands.bench_hough` (events/s).
 
 ``--baseline FILE`` adds the same rows for another version of ``hough.py``
 (e.g. ``git show COMMIT:spikejax/vision/hough.py > /tmp/old_hough.py``) and
@@ -36,7 +36,11 @@ import jax.numpy as jnp
 import numpy as np
 from skimage.transform import hough_line
 
-from spikejax.vision import bench_hough, hough
+from spikejax.benchmarking import JaxRun
+from spikejax.benchmarking import interleaved
+from spikejax.benchmarking import machine_banner
+from spikejax.commands import bench_hough
+from spikejax.vision import hough
 
 
 def _load(path):
@@ -62,17 +66,14 @@ def _distinct_streams(events, batch, n_slots):
 
 
 def _rounds(cands, rounds, repeats):
-    """Per round, the best seconds per unit of each candidate, as ratios to the first candidate's."""
+    """Per round, the best seconds per unit of each candidate (interleaved), as ratios to the first candidate's."""
     ratios = {k: [] for k in cands}
+    first = next(iter(cands))
     for _ in range(rounds):
-        best = {}
-        for _ in range(repeats):
-            for k, (fn, units) in cands.items():
-                t = time.perf_counter()
-                jax.block_until_ready(fn())
-                best[k] = min(best.get(k, np.inf), (time.perf_counter() - t) / units)
+        best = interleaved({k: JaxRun(fn) for k, (fn, _) in cands.items()}, repeats)
+        per_unit = {k: best[k] / units for k, (_, units) in cands.items()}
         for k in cands:
-            ratios[k].append(best[next(iter(cands))] / best[k])
+            ratios[k].append(per_unit[first] / per_unit[k])
     return ratios
 
 
@@ -94,7 +95,8 @@ def main(argv=None) -> int:
     streams = jax.tree.map(lambda a: jnp.broadcast_to(a, (args.batch,) + a.shape), events)
     a_streams = _distinct_streams(events, args.async_batch, args.async_slots)
     a_events = float(a_streams.valid.sum())
-    print(f"{jax.devices()[0].platform}, jax {jax.__version__}; {float(events.count().mean()):.0f} events a frame; "
+    print(machine_banner())
+    print(f"{float(events.count().mean()):.0f} events a frame; "
           f"sync batch {args.batch} x {n_slots} frames, async batch {args.async_batch} x {args.async_slots} frames")
 
     sync_cands = {"skimage hough_line": (lambda: [hough_line(im, thetas) for im in images], len(images))}
@@ -129,22 +131,17 @@ def main(argv=None) -> int:
     # the candidates (best of --repeats); events/s over all streams.
     rates = {k: [] for k in async_cands}
     loop = []
+    numpy_loop = bench_hough._numpy_async(events)
     for _ in range(args.rounds):
-        loop.append(bench_hough._numpy_async(events, 1)["events_per_s"])
+        loop.append(numpy_loop.n_events / numpy_loop())
         for k, (fn, units) in async_cands.items():
-            rates[k].append(max(units / _timed(fn) for _ in range(args.repeats)))
+            rates[k].append(units / min(JaxRun(fn)() for _ in range(args.repeats)))
     print(f"NumPy per-event loop: {np.median(loop) / 1e6:.3f} M events/s (median of {args.rounds})")
     for k, r in rates.items():
         ratio = [a / b for a, b in zip(r, loop)]
         print(f"{k:30s} {' '.join(f'{x:5.1f}' for x in ratio):27s} {np.median(ratio):5.1f} x the NumPy loop, "
               f"{np.median(r) / 1e6:.3f} M events/s")
     return 0
-
-
-def _timed(fn) -> float:
-    t = time.perf_counter()
-    jax.block_until_ready(fn())
-    return time.perf_counter() - t
 
 
 if __name__ == "__main__":

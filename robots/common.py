@@ -1,10 +1,11 @@
-"""Plumbing the robots' reproductions and benchmarks share: named sweep files, CSV tables, isolated runs."""
+"""Plumbing the robots' reproductions share: named sweep files, CSV tables.
+
+A benchmark's plumbing (isolated runs, timing, tables) is `spikejax.benchmarking`.
+"""
 
 from __future__ import annotations
 
 import csv
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from importlib import resources
 from importlib.resources.abc import Traversable
 from pathlib import Path
@@ -53,16 +54,3 @@ def write_csv(path: Path, header: list[str], rows: list[list]) -> None:
         writer.writerow(header)
         writer.writerows(rows)
     tmp.replace(path)
-
-
-def run_isolated(fn, *args, **kwargs):
-    """``fn(*args, **kwargs)`` in a fresh Python process; returns its result.
-
-    A benchmark runs each peer alone in its process, so that no thread pool of
-    another library (XLA's, MuJoCo's rollout threads, a NEST kernel's OpenMP
-    threads) competes with its threads or shares its state (Brian2's device
-    starts clean). The process ends normally, so its libraries' exit handlers
-    run (Brian2's removes its log files).
-    """
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(fn, *args, **kwargs).result()

@@ -1,6 +1,5 @@
 """``spikejax bench hough`` on one stream: the table it writes and the frames it times."""
 
-import argparse
 import csv
 import subprocess
 import sys
@@ -8,7 +7,8 @@ import sys
 import numpy as np
 from skimage.transform import hough_line
 
-from spikejax.vision import bench_hough, hough
+from spikejax.commands import bench_hough
+from spikejax.vision import hough
 
 
 def test_bench_frames_are_the_peers_frames():
@@ -23,8 +23,7 @@ def test_bench_frames_are_the_peers_frames():
 
 
 def test_bench_writes_every_implementation(tmp_path):
-    args = argparse.Namespace(trials=1, out=str(tmp_path), repeats=1, cpu_devices=1)
-    assert bench_hough.main(args) == 0
+    assert bench_hough.run(trials=1, out=str(tmp_path), repeats=1, cpu_devices=1, no_progress=True) == 0
     with open(tmp_path / "hough.csv") as f:
         rows = list(csv.DictReader(f))
     names = {(r["shape"], r["implementation"], r["mode"]) for r in rows}
@@ -43,6 +42,9 @@ def test_bench_writes_every_implementation(tmp_path):
         assert np.isclose(float(r["frames_per_s"]) * float(r["run_s"]), float(r["frames"]))
         if r["implementation"].startswith("spikejax"):
             assert float(r["compile_s"]) > 0  # reported apart from the run time
+        assert (r["cores"], r["parallel"]) == ("1", "1 device" if r["implementation"].startswith("spikejax")
+                                                else "1 process")
+        assert float(r["x_peer"]) > 0
     sync_line = next(r for r in rows if r["mode"] == "sync" and r["shape"] == "line")
     assert int(sync_line["frames"]) == bench_hough.N_FRAMES
     assert (tmp_path / "hough.png").stat().st_size > 0
@@ -76,3 +78,7 @@ def test_bench_splits_the_streams_over_two_cpu_devices(tmp_path):
                    and o["mode"] == r["mode"] and o["batch"] == r["batch"])
         assert r["frames"] == one["frames"] and r["events"] == one["events"]
         assert (r["devices"], one["devices"]) == ("2", "1")
+        assert (r["cores"], r["parallel"]) == ("2", "2 devices")
+    # Every peer also on both cores, one process each: the all-cores ratios are against these.
+    pooled = {r["implementation"] for r in rows if r["parallel"] == "2 processes"}
+    assert pooled == {f"{name}, 2 processes" for _, name, _ in bench_hough.PEERS}

@@ -1,11 +1,10 @@
 """The closed-loop RoboBee benchmark: Brian2 (runtime, NumPy target) and spikejax fly the same algorithm.
 
-Nothing here is timed; the benchmark itself is `robots.robobee.bench.main`.
+Nothing here is timed; the benchmark itself is `robots.robobee.bench.run`; the peer is `robots.robobee.peers`.
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import functools
 
@@ -14,12 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from robots.robobee import bench
-from robots.robobee.controller import controller_init
-from robots.robobee.controller import controller_step
-from robots.robobee.dynamics import clip_controls
-from robots.robobee.dynamics import rhs
+from robots.robobee import bench, peers
+from robots.robobee.controller import controller_init, controller_step
+from robots.robobee.dynamics import clip_controls, rhs
 from robots.robobee.params import robobee_params
+from spikejax.coding import antagonist_currents, shift_scale
 
 b2 = pytest.importorskip("brian2")
 
@@ -56,7 +54,7 @@ def test_flight_plan_scales_with_the_duration():
 
 def test_brian2_simulates_spikejax_flight_0_network():
     setup = bench.flight_setup(1, SEED)
-    flight = bench.Brian2Flight(setup.keys[0], 100, 200)
+    flight = peers.Brian2Flight(setup.keys[0], 100, 200)
     state = flight.state0
     for syn, mask, w in zip(flight.synapses, (state.mask_ih, state.mask_ho), (state.w_ih, state.w_ho)):
         i, j = np.nonzero(mask)
@@ -71,14 +69,26 @@ def test_brian2_simulates_spikejax_flight_0_network():
     assert flight.k == 10 and len(flight.recording()["t"]) == 1
 
 
+def test_brian2_encoder_is_the_antagonist_encoder_of_the_library():
+    # The peer keeps the encoder as float64 slopes and offsets; they are spikejax.coding's encoder.
+    setup = bench.flight_setup(1, SEED)
+    flight = peers.Brian2Flight(setup.keys[0], 0, 10)
+    cp, n_per = setup.cparams, setup.config.n_per_input
+    for e in (np.zeros(4), np.array([0.3, -0.2, 0.05, -0.01])):
+        ours = antagonist_currents(shift_scale(jnp.asarray(e, jnp.float32), cp.a, cp.b), n_per, cp.input_gain)
+        np.testing.assert_allclose(flight.offset + flight.slope * e[flight.group], ours, rtol=1e-6, atol=1e-6)
+
+
 def test_brian2_physics_is_the_semi_implicit_euler_step_of_rhs():
     # MuJoCo's integrator; tests/test_robobee_robot.py checks the MJX model against rhs.
     setup = bench.flight_setup(1, SEED)
-    flight = bench.Brian2Flight(setup.keys[0], 0, 10)
+    flight = peers.Brian2Flight(setup.keys[0], 0, 10)
     robot = jax.tree.map(np.float64, robobee_params())
-    for q, lift, torque in (((0.3, -2.0, 0.01, 0.05, 0.2, -0.1), 9e-4, 5e-7),
-                            ((-0.6, 0.0, 0.0, 0.02, 0.0, 0.0), 2e-3, -3e-6),  # both commands clipped
-                            ((0.0, 0.0, 0.0, 1e-6, 0.0, -0.5), 0.0, 0.0)):  # onto the floor
+    for q, lift, torque in (
+        ((0.3, -2.0, 0.01, 0.05, 0.2, -0.1), 9e-4, 5e-7),
+        ((-0.6, 0.0, 0.0, 0.02, 0.0, 0.0), 2e-3, -3e-6),  # both commands clipped
+        ((0.0, 0.0, 0.0, 1e-6, 0.0, -0.5), 0.0, 0.0),
+    ):  # onto the floor
         flight.q = q
         flight._physics(lift, torque)
         f_lift, tau_c = clip_controls(robot, lift, torque)
@@ -96,7 +106,7 @@ def test_same_spikes_with_learning_off_and_the_robot_held():
     """Learning off, the robot held at q0 for 50 ms: Brian2 and `controller_step` fire the same spikes."""
     setup = bench.flight_setup(1, SEED)
     n_steps = 500
-    flight = bench.Brian2Flight(setup.keys[0], hold_steps=n_steps, segment_steps=10, learn=False)
+    flight = peers.Brian2Flight(setup.keys[0], hold_steps=n_steps, segment_steps=10, learn=False)
     flight.run(n_steps)
     cp = setup.cparams
     n_ref = round(float(cp.t_ref) / float(cp.dt))
@@ -166,20 +176,31 @@ def test_large_batches_time_shorter_flights():
 
 
 def test_main_writes_the_closed_loop_table(tmp_path, capsys):
-    args = argparse.Namespace(trials=1, out=str(tmp_path), duration=DURATION, brian2_target="numpy", network=False,
-                              cpu_devices=1)
-    assert bench.main(args) == 0
+    assert (
+        bench.run(
+            trials=1,
+            out=str(tmp_path),
+            duration=DURATION,
+            brian2_target="numpy",
+            network=False,
+            cpu_devices=1,
+            repeats=1,
+            no_progress=True,
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "| Brian2 runtime (numpy) + network_operation | 1 |" in out
     with open(tmp_path / "bench_robobee.csv") as file:
         rows = list(csv.DictReader(file))
     assert [(r["impl"].split()[0], int(r["batch"])) for r in rows] == [("Brian2", 1), ("spikejax", 1)]
     assert float(rows[0]["x_brian2"]) == 1.0
+    assert [(r["cores"], r["parallel"]) for r in rows] == [("1", "1 process"), ("1", "1 device")]
     assert all(float(r["flights_per_s"]) > 0 for r in rows)
 
 
 _TWO_DEVICES = """
-import argparse, csv, sys
+import csv, sys
 import numpy as np
 from spikejax.devices import use_cpu_devices
 use_cpu_devices(2)
@@ -190,9 +211,11 @@ assert two["devices"] == 2 and two["impl"].endswith(", 2 devices"), two["impl"]
 for a, b in zip(one["recording"], two["recording"]):
     np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-7)
 out = sys.argv[1]
-bench.main(argparse.Namespace(trials=2, out=out, duration={duration}, brian2_target="numpy", network=False))
+bench.run(trials=2, out=out, duration={duration}, brian2_target="numpy", network=False, repeats=1, no_progress=True)
 with open(out + "/bench_robobee.csv") as f:
     rows = list(csv.DictReader(f))
+assert [(r["cores"], r["parallel"]) for r in rows] == [("1", "1 process"), ("2", "2 processes"), ("1", "1 device"),
+                                                      ("1", "1 device"), ("2", "2 devices")]
 print([(r["impl"], r["batch"], r["devices"], r["x_brian2"], r["x_brian2_all_cores"]) for r in rows])
 """
 
@@ -208,8 +231,12 @@ def test_two_cpu_devices_fly_the_same_flights_and_brian2_runs_on_both_cores(tmp_
     assert run.returncode == 0, run.stderr[-3000:]
     rows = ast.literal_eval(run.stdout.strip().splitlines()[-1])
     assert [(impl.split()[0], batch, devices) for impl, batch, devices, _, _ in rows] == [
-        ("Brian2", "1", "1"), ("Brian2", "2", "1"), ("spikejax", "1", "1"), ("spikejax", "2", "1"),
-        ("spikejax", "2", "2")]
+        ("Brian2", "1", "1"),
+        ("Brian2", "2", "1"),
+        ("spikejax", "1", "1"),
+        ("spikejax", "2", "1"),
+        ("spikejax", "2", "2"),
+    ]
     assert rows[1][0].endswith("2 processes at once") and rows[4][0].endswith(", 2 devices")
     # Each row against one Brian2 flight and against two side by side.
     assert float(rows[0][3]) == 1.0 and float(rows[1][4]) == 1.0

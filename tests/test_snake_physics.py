@@ -176,12 +176,11 @@ def test_bad_arguments_are_user_errors(kwargs, match):
 
 
 def test_bench_quick_writes_consistent_table(tmp_path):
-    import argparse
     import csv
 
     from robots.snake import bench
 
-    bench.main(argparse.Namespace(out=str(tmp_path), trials=None, quick=True, no_progress=True))
+    bench.run(out=str(tmp_path), quick=True, no_progress=True)
     rows = list(csv.DictReader(open(tmp_path / "snake.csv")))
     assert {r["impl"] for r in rows} == {"MuJoCo C physics only", "mujoco backend closed loop"}
     assert (tmp_path / "snake.png").stat().st_size > 0
@@ -195,3 +194,5 @@ def test_bench_quick_writes_consistent_table(tmp_path):
         assert float(r["run_s"]) == pytest.approx(batch * int(r["control_steps"]) / rate)
     c_row = next(r for r in rows if r["impl"].startswith("MuJoCo C"))
     assert float(c_row["vs_c_physics"]) == pytest.approx(1.0)
+    # One thread against one, and (with several cores) one a core against as many.
+    assert {r["cores"] for r in rows if r["impl"].startswith("MuJoCo C")} == {r["cores"] for r in rows}

@@ -14,76 +14,31 @@ two waypoints.
   optionally, robots drawn by `robots.robobee.params.randomize`): SNN,
   plasticity, decoder, teacher and MJX physics in one compiled ``lax.scan``,
   on one device or split over several (`spikejax.devices.shard_batch`).
-- `run_brian2_closed_loop`: the paper's own setup. "At every time step, the
-  simulator calls a function to update the RoboBee state and another function
-  to compute the weight changes for each set of synapses following equation
-  (10)": the same network (the same drawn weights, connectivity and thresholds
-  as spikejax's flight 0) in Brian2's runtime mode, and a
-  ``network_operation`` that runs at the end of every step (see
-  `Brian2Flight`). `run_brian2_on_all_cores` runs one such flight per core
-  side by side, as a Brian2 user with several cores would.
+- `run_brian2_closed_loop`: the paper's own setup, `robots.robobee.peers.Brian2Flight`
+  (the same network as spikejax's flight 0 in Brian2's runtime mode, and a
+  ``network_operation`` that runs at the end of every step).
+  `run_brian2_on_all_cores` runs one such flight per core side by side, as a
+  Brian2 user with several cores would.
 
 Each returns a row with compile or build time apart from run time, flights per
 second, simulated seconds per wall-clock second and aggregate neuron updates
-per second (350 neurons x steps x flights / run seconds). `main` prints the
-closed-loop table and then the network-alone table of
-`robots.robobee.bench_network.main_network`.
-
-Notes:
-    What Brian2 does in one step ``k`` (from ``t_k`` to ``t_k + dt``), in the
-    order of `controller_step` (every object in one schedule slot, ordered):
-
-    1. The input layer integrates the current that the network operation set
-       at the end of the previous step (``method='exact'``, refractory 2 ms),
-       tests its thresholds and resets.
-    2. The input -> hidden synapses add ``syn_hidden * w`` to the hidden
-       neurons' current ``I`` for every input spike of this step (no delay);
-       the hidden layer integrates that current over the step, tests and
-       resets; the same for hidden -> output (``syn_output``).
-    3. The network operation (Python, NumPy) reads the three layers' spikes of
-       the step (each group's ``_spikespace``, as ``NeuronGroup.spikes``
-       reads it), updates the decoder of Eq. (8), the
-       traces of Eq. (9) and, by Eq. (10), the weights of both synapse sets
-       in place in Brian2's own arrays (clipped to ``[w_min, w_max]``);
-       applies the lift of the altitude controller and the decoded torque to
-       the robot, one semi-implicit Euler step (MuJoCo's integrator, so the
-       arithmetic of the MJX step of `robots.robobee.physics`) of Eq. (4)-(5),
-       `robots.robobee.dynamics.rhs` written out in scalar Python (float64;
-       held at ``q0`` during the hold); then computes the next step's target,
-       LQR teacher and encoder currents (antagonist halves as in
-       `controller_step`) and writes them into the input layer, and zeroes
-       the synaptic currents of the other two layers.
-
-    That is the algorithm of `robots.robobee.flight.fly` step for step;
-    Brian2 computes in float64 and spikejax in float32, so the spike trains
-    part where float32 rounding decides a threshold test, and from there the
-    two learning networks drift apart like two seeds (over the first 50 ms of
-    a scaled flight they give the same outputs, ``tests/test_robobee_bench.py``).
-
-    Where the time goes, measured on a 2-core CPU (one run, so rough):
-    Brian2 takes about 90 us per step, a little over half of it in the network
-    operation, and one ``Network.run`` costs about 0.2 s of preparation (so a
-    flight is timed whole: a 0.2 s run extrapolated would understate Brian2
-    twofold). spikejax takes 3.3-3.8 us per flight-step on one device from 16
-    flights on: about 0.8 us the MJX robot where it moves (the hold does not
-    step it), the rest the SNN with its plasticity, decoder and teacher. The
-    learned weights are kept per presynaptic row and read only for the neurons
-    that spiked, found from the spikes packed as bits (`spikejax.synapses`), so
-    the step does not read and rewrite every flight's 25,000 weights and large
-    batches stay about as fast as small ones. Split over the two cores'
-    devices, 16-256 flights take 1.3-1.9 us of wall time per flight-step.
+per second (350 neurons x steps x flights / run seconds), and the cores it used
+(``cores``, ``parallel``). `run` builds every row's program first (Brian2 in
+processes of its own, `spikejax.benchmarking.Processes`; spikejax compiled
+ahead), then times each once a round, the best of ``--repeats`` rounds kept
+(`spikejax.benchmarking.interleaved`), prints the closed-loop table and then,
+unless ``--no-network``, the network-alone table of
+`robots.robobee.bench_network.run`. Every row is quoted against one Brian2
+flight on one core (``x_brian2``) and against one flight per core on all cores
+(``x_brian2_all_cores``); a row's fair ratio is the one of its ``cores``. Where
+the time goes is in ``docs/BENCHMARKS.md``.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
+import contextlib
 import math
-import multiprocessing
-import os
-import platform
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -91,9 +46,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from robots.common import run_isolated
 from robots.robobee import bench_network
-from robots.robobee.controller import TORQUE_UNIT
 from robots.robobee.controller import ControllerConfig
 from robots.robobee.controller import controller_init
 from robots.robobee.controller import controller_params
@@ -101,21 +54,34 @@ from robots.robobee.flight import flight_plan
 from robots.robobee.flight import fly
 from robots.robobee.lqr import altitude_params
 from robots.robobee.lqr import lateral_gain
-from robots.robobee.params import max_lift
-from robots.robobee.params import randomize
 from robots.robobee.params import robobee_params
+from robots.robobee.params import randomize
+from robots.robobee.peers import RECORD_EVERY
+from robots.robobee.peers import Brian2FlightRun
+from spikejax.benchmarking import JaxRun
+from spikejax.benchmarking import Processes
+from spikejax.benchmarking import batch_sizes
+from spikejax.benchmarking import compile_ahead
+from spikejax.benchmarking import cores_label
+from spikejax.benchmarking import interleaved
+from spikejax.benchmarking import machine_banner
+from spikejax.benchmarking import write_csv
+from spikejax.commands import Command
+from spikejax.commands import count
+from spikejax.commands import positive_float
 from spikejax.devices import cpu_devices_for_run
 from spikejax.devices import shard_batch
 from spikejax.errors import UserError
 
 __all__ = [
     "BATCHES",
-    "Brian2Flight",
+    "COLUMNS",
     "FlightSetup",
+    "command",
     "flight_setup",
     "flight_steps",
-    "main",
     "network_key",
+    "run",
     "run_brian2_closed_loop",
     "run_brian2_on_all_cores",
     "run_spikejax_flights",
@@ -125,7 +91,6 @@ __all__ = [
 DT = 1e-4  # s, the neural and physics step
 FLIGHT_S = 2.5  # s: hold 0.5 s + 2 x 1 s, the paper's first flight
 HOLD_FRACTION = 0.2
-RECORD_EVERY = 10
 # 64: about where the batch's weights (200 KB per flight) stop fitting in a 32 MB L3 cache.
 BATCHES = (1, 16, 64, 256, 1024, 4096)
 # Flight-steps (flights x steps) one timed spikejax run may take: a batch whose
@@ -138,6 +103,7 @@ N_NEURONS = 350
 
 ROW_FIELDS = ("impl", "batch", "flight_s", "timed_s", "build_or_compile_s", "run_s", "flights_per_s",
               "sim_s_per_wall_s", "neuron_updates_per_s", "reached_q1", "reached_q2")
+COLUMNS = (*ROW_FIELDS, "devices", "cores", "parallel", "x_brian2", "x_brian2_all_cores")
 
 
 def timed_duration(batch: int, duration: float, step_budget: int = STEP_BUDGET) -> float:
@@ -238,19 +204,50 @@ def _row(impl, batch, flight_s, timed_s, build_s, run_s, reached=(math.nan, math
 # ----------------------------------------------------------------- spikejax
 
 
+def _spikejax_flights(batch: int, duration: float, seed: int, *, randomize_robots: bool = False,
+                      step_budget: int = STEP_BUDGET, devices: int = 1) -> tuple[JaxRun, dict]:
+    """The compiled flights of `run_spikejax_flights` and what their row needs besides the run time."""
+    setup = flight_setup(batch, seed, randomize_robots)
+    timed = timed_duration(batch, duration, step_budget)
+    hold_steps, segment_steps = flight_steps(timed)
+
+    def one(robot, key):
+        return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, jnp.bool_(True),
+                   hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY, key=key)
+
+    if devices > jax.device_count():
+        raise UserError(f"{devices} devices asked, JAX presents {jax.device_count()}")
+    fn = shard_batch(jax.vmap(one), jax.devices()[:devices])
+    compiled, compile_s = compile_ahead(fn, setup.robots, setup.keys)
+    impl = "spikejax jit(vmap(fly))" + (" randomized robots" if randomize_robots else "")
+    impl += f", {devices} devices" if devices > 1 else ""
+    return JaxRun(compiled, setup.robots, setup.keys), dict(
+        impl=impl, batch=batch, duration=duration, timed=timed, compile_s=compile_s, plan=setup.plan,
+        hold_steps=hold_steps, segment_steps=segment_steps, devices=devices)
+
+
+def _flights_row(info: dict, run_s: float, rec) -> dict:
+    rec = jax.tree.map(np.asarray, rec)
+    reached = (math.nan, math.nan)
+    if math.isclose(info["timed"], info["duration"], abs_tol=DT / 2):
+        reached = _reached(rec.t[0], rec.q, info["plan"], info["hold_steps"], info["segment_steps"])
+    return _row(info["impl"], info["batch"], info["duration"], info["timed"], info["compile_s"], run_s, reached,
+                recording=rec, devices=info["devices"], cores=info["devices"],
+                parallel=cores_label(info["devices"], "device"))
+
+
 def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, *, randomize_robots: bool = False,
                          step_budget: int = STEP_BUDGET, repeats: int = 1, devices: int = 1) -> dict:
     """``batch`` closed-loop flights of ``duration`` seconds as one ``jax.jit(jax.vmap(fly))``.
 
-    The program is compiled ahead (``lower(...).compile()``, ``build_or_compile_s``)
-    and run to completion ``repeats`` times (``run_s``: the fastest). With
-    ``devices > 1`` the flights are split evenly over the first ``devices`` of
-    ``jax.devices()`` (`spikejax.devices.shard_batch`: each CPU device runs on
-    its own core), and the compile time is the first call's time less ``run_s``. If
-    ``batch`` whole flights exceed ``step_budget`` flight-steps, the flights
-    timed are shortened to fit it (same 20 % hold and two segments, at least
-    0.05 s) and the throughputs extrapolated to ``duration``: the scan's steps
-    all cost the same.
+    The program is compiled ahead (`spikejax.benchmarking.compile_ahead`,
+    ``build_or_compile_s``) and run to completion ``repeats`` times (``run_s``:
+    the fastest). With ``devices > 1`` the flights are split evenly over the
+    first ``devices`` of ``jax.devices()`` (`spikejax.devices.shard_batch`:
+    each CPU device runs on its own core). If ``batch`` whole flights exceed
+    ``step_budget`` flight-steps, the flights timed are shortened to fit it
+    (same 20 % hold and two segments, at least 0.05 s) and the throughputs
+    extrapolated to ``duration``: the scan's steps all cost the same.
 
     Args:
         batch: flights flown at once, each with its own network seed.
@@ -269,278 +266,58 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
         when the flights were shortened), ``recording`` the flights'
         `robots.robobee.flight.Recording` (NumPy).
     """
-    setup = flight_setup(batch, seed, randomize_robots)
-    timed = timed_duration(batch, duration, step_budget)
-    hold_steps, segment_steps = flight_steps(timed)
-
-    def one(robot, key):
-        return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, jnp.bool_(True),
-                   hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY, key=key)
-
-    if devices > jax.device_count():
-        raise UserError(f"{devices} devices asked, JAX presents {jax.device_count()}")
-    if devices == 1:
-        t0 = time.perf_counter()
-        compiled = jax.jit(jax.vmap(one)).lower(setup.robots, setup.keys).compile()
-        compile_s = time.perf_counter() - t0
-    else:
-        compiled = shard_batch(jax.vmap(one), jax.devices()[:devices])
-        t0 = time.perf_counter()
-        jax.block_until_ready(compiled(setup.robots, setup.keys))
-        first_s = time.perf_counter() - t0
-    run_s = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        rec = jax.block_until_ready(compiled(setup.robots, setup.keys))
-        run_s = min(run_s, time.perf_counter() - t0)
-    if devices > 1:
-        compile_s = max(first_s - run_s, 0.0)
-    rec = jax.tree.map(np.asarray, rec)
-    reached = (math.nan, math.nan)
-    if math.isclose(timed, duration, abs_tol=DT / 2):
-        reached = _reached(rec.t[0], rec.q, setup.plan, hold_steps, segment_steps)
-    impl = "spikejax jit(vmap(fly))" + (" randomized robots" if randomize_robots else "")
-    impl += f", {devices} devices" if devices > 1 else ""
-    return _row(impl, batch, duration, timed, compile_s, run_s, reached, recording=rec, devices=devices)
+    timer, info = _spikejax_flights(batch, duration, seed, randomize_robots=randomize_robots,
+                                    step_budget=step_budget, devices=devices)
+    run_s = min(timer() for _ in range(repeats))
+    return _flights_row(info, run_s, timer.result)
 
 
 # ----------------------------------------------------------------- Brian2
 
 
-class Brian2Flight:
-    """One closed-loop flight in Brian2's runtime mode: the network in Brian2, the rest in a network operation.
+def _brian2_args(duration: float, seed: int, target: str, flight_s: float, scale_plan: bool = True) -> tuple:
+    """`robots.robobee.peers.Brian2FlightRun`'s arguments for flight 0 of ``seed`` (the key as its data)."""
+    hold_steps, segment_steps = flight_steps(duration if scale_plan else flight_s)
+    key = np.asarray(jax.random.key_data(network_key(seed, 0)))
+    return key, hold_steps, segment_steps, round(duration / DT), target
 
-    The network is the one `controller_init` draws from ``key`` (the same
-    weights, connectivity and thresholds as the spikejax flight of that key);
-    the controller's constants are ``cparams``'s. The schedule and the network
-    operation are described in the module's notes.
 
-    Args:
-        key: the network's key.
-        hold_steps: steps the robot is held at ``q0`` (target ``q0``).
-        segment_steps: steps spent on each waypoint.
-        learn: apply Eq. (10) (the traces run either way), as `controller_step`'s ``learn``.
-        use_snn: the decoded output steers (else the teacher does, the SNN learning beside it).
-        robot: the flown robot (`robobee_params` if None); the teacher is designed for the nominal one.
-        record_every: the recording's sampling, as in `fly`.
-
-    Attributes:
-        net: the `brian2.Network`.
-        counts: spikes per neuron so far, input then hidden then output, ``(350,)``.
-    """
-
-    def __init__(self, key: jax.Array, hold_steps: int, segment_steps: int, *, learn: bool = True,
-                 use_snn: bool = True, robot=None, record_every: int = RECORD_EVERY):
-        import brian2 as b2
-
-        config, cp = ControllerConfig(), controller_params()
-        f = lambda x: float(np.asarray(x))  # noqa: E731
-        self.config = config
-        self.hold_steps, self.segment_steps, self.record_every = hold_steps, segment_steps, record_every
-        self.n_steps = hold_steps + 2 * segment_steps
-        self.learn, self.use_snn = learn, use_snn
-        state = jax.tree.map(lambda x: np.asarray(x, np.float64), controller_init(config, cp, key=key))
-        self.state0 = state
-        nominal = robobee_params()
-        self.robot = jax.tree.map(np.float64, nominal if robot is None else robot)
-        self.K = np.asarray(jnp.asarray(lateral_gain(nominal), jnp.float32), np.float64).reshape(4)
-        alt = jax.tree.map(f, altitude_params())
-        self.kp, self.kd, self.cos_min = alt.kp, alt.kd, alt.cos_min
-        plan = flight_plan("waypoints")
-        self.targets = np.concatenate([np.asarray(plan.q0, np.float64)[None], np.asarray(plan.waypoints, np.float64)])
-        self.dt = f(cp.dt)
-        self.a, self.b = np.asarray(cp.a, np.float64), np.asarray(cp.b, np.float64)
-        self.input_gain = f(cp.input_gain)
-        self.alpha, self.gamma = f(cp.decoder.alpha), f(cp.decoder.gamma)
-        self.decoder_decay = math.exp(-f(cp.decoder.beta) * self.dt)
-        self.mu_h, self.mu_o, self.tau_r = f(cp.mu_hidden), f(cp.mu_output), f(cp.tau_reward)
-        self.w_min, self.w_max = f(cp.w_min), f(cp.w_max)
-        self.lift_max = float(max_lift(self.robot))
-        self.robot_py = {name: float(x) for name, x in self.robot._asdict().items()}
-        self.K_py = tuple(float(x) for x in self.K)
-        self.targets_py = [tuple(float(x) for x in t) for t in self.targets]
-        self.minus_inv_tau_r = -1.0 / self.tau_r
-        self.n_input, self.n_hidden = config.n_input, config.n_hidden
-        # Encoder: input neuron n reads the lateral error e_g of its group g = n // n_per_input
-        # as input_gain * q_hat_g (first half) or input_gain * (1 - q_hat_g) (second half),
-        # q_hat = a (e + b), that is offset_n + slope_n e_g.
-        n_per = config.n_per_input
-        self.group = np.repeat(np.arange(4), n_per)
-        antagonist = np.tile(np.arange(n_per) >= n_per // 2, 4)
-        a, b = self.a[self.group], self.b[self.group]
-        self.slope = np.where(antagonist, -1.0, 1.0) * self.input_gain * a
-        self.offset = self.input_gain * np.where(antagonist, 1.0 - a * b, a * b)
-        self.e = np.zeros(4)
-
-        b2.defaultclock.dt = self.dt * b2.second
-        eqs = """dv/dt = (I - v) / tau : 1 (unless refractory)
-        I : 1
-        v_th : 1 (constant)
-        tau : second (constant)"""
-        sizes = (config.n_input, config.n_hidden, config.n_output)
-        taus = (f(cp.tau_input), f(cp.tau_hidden), f(cp.tau_output))
-        thresholds = (state.v_th_input, state.v_th_hidden, state.v_th_output)
-        self.groups = []
-        for n, tau, v_th, name in zip(sizes, taus, thresholds, ("input", "hidden", "output")):
-            g = b2.NeuronGroup(n, eqs, threshold="v >= v_th", reset="v = 0", refractory=f(cp.t_ref) * b2.second,
-                               method="exact", name=f"robobee_{name}*")
-            g.v_th = v_th
-            g.tau = tau * b2.second
-            self.groups.append(g)
-        self.synapses, self.pre_index = [], []
-        masks = [np.asarray(m, np.float64) for m in (state.mask_ih, state.mask_ho)]
-        weights = [np.asarray(w, np.float64) for w in (state.w_ih, state.w_ho)]
-        for (pre, post), mask, w, c in zip(zip(self.groups, self.groups[1:]), masks, weights,
-                                           (f(cp.syn_hidden), f(cp.syn_output))):
-            syn = b2.Synapses(pre, post, "w : 1", on_pre="I_post += c_syn * w", namespace={"c_syn": c})
-            i, j = np.nonzero(mask)
-            syn.connect(i=i, j=j)
-            syn.w = w[i, j]
-            self.synapses.append(syn)
-            self.pre_index.append(i)
-        # Row of each synapse's presynaptic neuron in the rule's traces (input neurons, then hidden ones).
-        self.pre_rows = [self.pre_index[0], config.n_input + self.pre_index[1]]
-        # One slot, ordered as controller_step: each layer integrates, fires and
-        # resets before its spikes reach the next layer in the same step.
-        order = []
-        for g, syn in zip(self.groups, [*self.synapses, None]):
-            order += [g.state_updater, g.thresholder["spike"], g.resetter["spike"]]
-            if syn is not None:
-                order.append(syn.pre)
-        for k, obj in enumerate(order):
-            obj.when, obj.order = "groups", k
-        self.operation = b2.NetworkOperation(self._step, dt=self.dt * b2.second, when="end")
-        self.net = b2.Network(*self.groups, *self.synapses, self.operation)
-        self.net.store("start")
-        self.reset()
-
-    def reset(self) -> None:
-        """Back to the flight's start: the network as drawn (`brian2.Network.restore`), robot at ``q0``."""
-        self.net.restore("start")
-        n_in, n_h = self.config.n_input, self.config.n_hidden
-        self.k = 0
-        self.q = tuple(float(x) for x in self.targets[0])
-        self.trace = 0.0
-        # Eq. (9) for the input neurons, then the hidden ones: time since the last spike and reward trace.
-        self.since = np.full(n_in + n_h, np.inf)
-        self.r = np.zeros(n_in + n_h)
-        self.counts = np.zeros(N_NEURONS, np.int64)
-        self.records = []
-        self.op_s = 0.0
-        # Brian2's own arrays, read and written in place by the network operation.
-        self.w = [syn.variables["w"].get_value() for syn in self.synapses]
-        self.current = [g.variables["I"].get_value() for g in self.groups]
-        self.spikespace = [g.variables["_spikespace"].get_value() for g in self.groups]
-        self._set_inputs()
-
-    def _set_inputs(self) -> None:
-        """The target, the teacher and the input layer's currents for step ``k`` from the state ``q(t_k)``."""
-        k = self.k
-        segment = 0 if k < self.hold_steps else min(1 + (k - self.hold_steps) // self.segment_steps, 2)
-        self.target = target = self.targets_py[segment]
-        q = self.q
-        e = self.e
-        e[0], e[1], e[2], e[3] = q[0] - target[0], q[1] - target[1], q[2] - target[2], q[4] - target[4]
-        K = self.K_py
-        y = -(K[0] * e[0] + K[1] * e[1] + K[2] * e[2] + K[3] * e[3]) / TORQUE_UNIT
-        self.y_lqr = min(max(y, -1.0), 1.0)
-        # input_gain * q_hat or input_gain * (1 - q_hat), q_hat = a (e + b): an affine function of e.
-        current = self.current[0]
-        np.take(e, self.group, out=current)
-        current *= self.slope
-        current += self.offset
-        self.current[1].fill(0.0)
-        self.current[2].fill(0.0)
-
-    def _physics(self, lift: float, torque: float) -> None:
-        """One semi-implicit Euler step (MuJoCo's integrator) of Eq. (4)-(5) (`rhs`), then the floor.
-
-        The clipping of `clip_controls` and the dynamics of `rhs` in scalar
-        Python (``tests/test_robobee_bench.py`` checks them against both).
-        """
-        p, dt = self.robot_py, self.dt
-        f_lift = min(max(lift, 0.0), self.lift_max)
-        tau_c = min(max(torque, -p["torque_limit"]), p["torque_limit"])
-        theta, theta_dot, x, z, x_dot, z_dot = self.q
-        c, s = math.cos(theta), math.sin(theta)
-        f_d = -p["b_w"] * (x_dot * c - z_dot * s + p["r_w"] * theta_dot)
-        x_ddot = (f_lift * s + f_d * c) / p["mass"]
-        z_ddot = (f_lift * c - f_d * s) / p["mass"] - p["g"]
-        theta_ddot = (tau_c + p["r_w"] * f_d) / p["inertia_y"]
-        theta_dot, x_dot, z_dot = theta_dot + dt * theta_ddot, x_dot + dt * x_ddot, z_dot + dt * z_ddot
-        theta, x, z = theta + dt * theta_dot, x + dt * x_dot, z + dt * z_dot
-        if z < 0.0:
-            z, z_dot = 0.0, max(z_dot, 0.0)
-        self.q = (theta, theta_dot, x, z, x_dot, z_dot)
-
-    def _step(self) -> None:
-        """The network operation at the end of step ``k``: decoder, rule, robot, next step's inputs."""
-        t0 = time.perf_counter()
-        s_in, s_h, s_out = (ss[: ss[-1]] for ss in self.spikespace)
-        counts = self.counts
-        counts[s_in] += 1
-        counts[self.n_input + s_h] += 1
-        counts[self.n_input + self.n_hidden + s_out] += 1
-        # Eq. (8): the output layer's spikes of this step, decayed over it.
-        self.trace = self.decoder_decay * (self.trace + len(s_out))
-        y_hat = self.alpha * self.trace - self.gamma
-        error = self.y_lqr - y_hat
-        sign = 1.0 if error > 0 else (-1.0 if error < 0 else 0.0)
-        # Eq. (9) for the input and hidden neurons (the presynaptic ones), then
-        # Eq. (10) for the input -> hidden and hidden -> output synapses.
-        since, r = self.since, self.r
-        since += self.dt
-        since[s_in] = 0.0
-        since[self.n_input + s_h] = 0.0
-        r += sign
-        r *= np.exp(since * self.minus_inv_tau_r)
-        if self.learn:
-            for w, pre, mu in zip(self.w, self.pre_rows, (self.mu_h, self.mu_o)):
-                w += mu * r[pre]
-                np.clip(w, self.w_min, self.w_max, out=w)
-        if self.k % self.record_every == self.record_every - 1:
-            self.records.append((*self.q, *self.target, y_hat, self.y_lqr))
-        # The robot: the altitude controller's lift and the SNN's (or the teacher's) torque.
-        if self.k >= self.hold_steps:
-            q, target = self.q, self.target
-            accel = self.kp * (target[3] - q[3]) + self.kd * (target[5] - q[5])
-            lift = self.robot_py["mass"] * (self.robot_py["g"] + accel) / max(math.cos(q[0]), self.cos_min)
-            y = min(max(y_hat, -1.0), 1.0) if self.use_snn else self.y_lqr
-            self._physics(lift, y * TORQUE_UNIT)
-        self.k += 1
-        self._set_inputs()
-        self.op_s += time.perf_counter() - t0
-
-    def run(self, n_steps: int) -> None:
-        """Runs ``n_steps`` steps from where the flight is."""
-        import brian2 as b2
-
-        self.net.run(n_steps * self.dt * b2.second)
-
-    def recording(self) -> dict:
-        """What was recorded every ``record_every`` steps: ``t``, ``q``, ``target``, ``y_hat``, ``y_lqr`` (as `fly`)."""
-        rec = np.array(self.records, np.float64).reshape(-1, 14)
-        n = len(rec)
-        return dict(t=(np.arange(n) + 1) * self.record_every * self.dt, q=rec[:, :6], target=rec[:, 6:12],
-                    y_hat=rec[:, 12], y_lqr=rec[:, 13])
+def _brian2_row(info: dict, duration: float, flight_s: float, scale_plan: bool = True, processes: int = 1,
+                build_s: float | None = None, run_s: float | None = None) -> dict:
+    """The row of a Brian2 flight (`robots.robobee.peers.Brian2FlightRun.info`), or of ``processes`` side by side."""
+    hold_steps, segment_steps = flight_steps(duration if scale_plan else flight_s)
+    n_steps = round(duration / DT)
+    rec = info["recording"]
+    reached = []
+    for w in range(2):
+        if hold_steps + (w + 1) * segment_steps > n_steps:
+            reached.append(math.nan)
+        else:
+            reached.append(_reached(rec["t"], rec["q"][None], flight_plan("waypoints"), hold_steps,
+                                    segment_steps)[w])
+    impl = info["impl"] + (f", {processes} processes at once" if processes > 1 else "")
+    extra = dict(recording=rec, counts=info["counts"], w_ih=info["w_ih"], w_ho=info["w_ho"], op_s=info["op_s"],
+                 prepare_s=info["prepare_s"]) if processes == 1 else {}
+    return _row(impl, processes, flight_s, n_steps * DT, info["build_s"] if build_s is None else build_s,
+                info["run_s"] if run_s is None else run_s, reached, cores=processes,
+                parallel=cores_label(processes, "process"), devices=1, **extra)
 
 
 def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
                            flight_s: float = FLIGHT_S, scale_plan: bool = True, learn: bool = True,
-                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY, barrier=None,
-                           repeats: int = 1) -> dict:
-    """One closed-loop flight in Brian2's runtime mode (`Brian2Flight`), timed on ``duration`` simulated seconds.
+                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY, repeats: int = 1) -> dict:
+    """One closed-loop flight in Brian2's runtime mode (`robots.robobee.peers.Brian2FlightRun`), timed on ``duration``.
 
     The network is spikejax's flight 0 of the same ``seed``. A first run of
     ``warmup_steps`` steps generates (and for Cython compiles, or loads from
     Cython's cache) the code: ``build_or_compile_s`` is the network's
-    construction plus that run. Then the flight restarts (`Brian2Flight.reset`)
-    and ``duration`` seconds are timed ``repeats`` times, the flight restarted
-    before each (``run_s``: the fastest ``Network.run``, its
-    preparation included: ``prepare_s``, the time of a further run of
-    ``warmup_steps``, measures that); flights/s is extrapolated to a
-    ``flight_s`` flight if ``duration`` is shorter (Brian2's time per step is
-    constant). If Cython cannot compile, NumPy runs instead and ``impl`` says so.
+    construction plus that run. Then ``duration`` seconds are timed
+    ``repeats`` times, the flight restarted before each (``run_s``: the
+    fastest ``Network.run``, its preparation included: ``prepare_s``, the time
+    of a further run of ``warmup_steps``, measures that); flights/s is
+    extrapolated to a ``flight_s`` flight if ``duration`` is shorter (Brian2's
+    time per step is constant). If Cython cannot compile, NumPy runs instead
+    and ``impl`` says so. The code generation target is restored after.
 
     Args:
         duration: simulated seconds to run and time.
@@ -554,8 +331,6 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
         learn: apply Eq. (10).
         use_snn: the SNN steers (else the teacher).
         warmup_steps: steps of the code-generating first run.
-        barrier: if given (a ``multiprocessing`` barrier), waited on just before each
-            timed run, so that flights in several processes are timed together.
         repeats: timed runs (the recording and weights are those of the first).
 
     Returns:
@@ -566,59 +341,16 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
     """
     import brian2 as b2
 
-    hold_steps, segment_steps = flight_steps(duration if scale_plan else flight_s)
-    n_steps = round(duration / DT)
-    key = network_key(seed, 0)
-    impl = f"Brian2 runtime ({target}) + network_operation"
     old_target = b2.prefs.codegen.target
     try:
-        b2.prefs.codegen.target = target
-        t0 = time.perf_counter()
-        try:
-            flight = Brian2Flight(key, hold_steps, segment_steps, learn=learn, use_snn=use_snn)
-            flight.run(warmup_steps)
-        except Exception as err:  # noqa: BLE001 - whatever broke the compiler: fall back, and say so
-            if target == "numpy":
-                raise
-            b2.prefs.codegen.target = "numpy"
-            impl = f"Brian2 runtime (numpy; {target} failed: {type(err).__name__}) + network_operation"
-            flight = Brian2Flight(key, hold_steps, segment_steps, learn=learn, use_snn=use_snn)
-            flight.run(warmup_steps)
-        build_s = time.perf_counter() - t0
-        run_s, result = math.inf, None
+        run = Brian2FlightRun(*_brian2_args(duration, seed, target, flight_s, scale_plan), learn=learn,
+                              use_snn=use_snn, warmup_steps=warmup_steps)
         for _ in range(repeats):
-            flight.reset()
-            if barrier is not None:
-                barrier.wait()
-            t0 = time.perf_counter()
-            flight.run(n_steps)
-            run_s = min(run_s, time.perf_counter() - t0)
-            if result is None:
-                weights = [np.asarray(syn.w[:]) for syn in flight.synapses]
-                result = flight.recording(), flight.counts.copy(), flight.op_s, weights
-        flight.reset()
-        t0 = time.perf_counter()
-        flight.run(warmup_steps)
-        prepare_s = time.perf_counter() - t0
+            run()
+        info = run.info
     finally:
         b2.prefs.codegen.target = old_target
-    rec, counts, op_s, weights = result
-    reached = []
-    for w in range(2):
-        end_step = hold_steps + (w + 1) * segment_steps
-        if end_step > n_steps:
-            reached.append(math.nan)
-        else:
-            reached.append(_reached(rec["t"], rec["q"][None], flight_plan("waypoints"), hold_steps,
-                                    segment_steps)[w])
-    dense = []
-    for w_syn, mask in zip(weights, (flight.state0.mask_ih, flight.state0.mask_ho)):
-        mask = np.asarray(mask)
-        w = np.zeros(mask.shape)
-        w[np.nonzero(mask)] = w_syn
-        dense.append(w)
-    return _row(impl, 1, flight_s, n_steps * DT, build_s, run_s, reached, recording=rec, counts=counts,
-                w_ih=dense[0], w_ho=dense[1], op_s=op_s, prepare_s=prepare_s)
+    return _brian2_row(info, duration, flight_s, scale_plan)
 
 
 def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
@@ -627,89 +359,117 @@ def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: in
 
     Brian2's runtime mode runs one flight on one core; a user with several
     cores runs several flights side by side. Each process builds its flight
-    (`run_brian2_closed_loop`) and then all start their timed run together
-    (a barrier), ``repeats`` times; the row's ``run_s`` is the slowest
-    process's fastest run, so its flights/s is the aggregate of all of them.
+    and then all start their timed run together (a barrier,
+    `spikejax.benchmarking.Processes`), ``repeats`` times; the row's ``run_s``
+    is the slowest process's run, the fastest of the repeats, so its flights/s
+    is the aggregate of all of them.
 
     Returns:
         A row (`ROW_FIELDS`) with ``batch = processes``; ``build_or_compile_s`` is the slowest build.
     """
-    context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager:
-        barrier = manager.Barrier(processes)
-        with ProcessPoolExecutor(processes, mp_context=context) as pool:
-            futures = [pool.submit(run_brian2_closed_loop, duration, seed, target, flight_s=flight_s, barrier=barrier,
-                                   repeats=repeats) for _ in range(processes)]
-            rows = [f.result() for f in futures]
-    impl = f"{rows[0]['impl']}, {processes} processes at once"
-    return _row(impl, processes, flight_s, rows[0]["timed_s"], max(r["build_or_compile_s"] for r in rows),
-                max(r["run_s"] for r in rows), (rows[0]["reached_q1"], rows[0]["reached_q2"]))
+    with Processes(Brian2FlightRun, *_brian2_args(duration, seed, target, flight_s), processes=processes) as run:
+        run_s = min(run() for _ in range(repeats))
+        infos = run.info()
+    return _brian2_row(infos[0], duration, flight_s, processes=processes,
+                       build_s=max(i["build_s"] for i in infos), run_s=run_s)
 
 
 # ----------------------------------------------------------------- CLI
 
 
-def _batches(trials) -> tuple[int, ...]:
-    """`BATCHES` up to ``trials`` (and ``trials`` itself), or all of them."""
-    if not trials:
-        return BATCHES
-    return tuple(sorted({b for b in BATCHES if b <= trials} | {int(trials)}))
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--trials", type=count, default=None,
+                        help="the largest batch of flights (default: every batch of 1 .. 4096)")
+    parser.add_argument("--out", default=None, help="write bench_robobee.csv (and bench_robobee_network.csv) here")
+    parser.add_argument("--duration", type=positive_float, default=None,
+                        help=f"simulated seconds of a flight (default {FLIGHT_S})")
+    parser.add_argument("--seed", type=int, default=None, help="network seed (default 0)")
+    parser.add_argument("--repeats", type=count, default=None,
+                        help="timed rounds, Brian2's and spikejax's, the best kept (default 3)")
+    parser.add_argument("--randomize", action="store_true", help="also fly randomized robots at the largest batch")
+    parser.add_argument("--brian2-target", choices=("cython", "numpy"), default=None,
+                        help="Brian2's code generation target (default cython)")
+    parser.add_argument("--network", action=argparse.BooleanOptionalAction, default=True,
+                        help="then run the network-alone table (default: yes)")
+    parser.add_argument("--cpu-devices", type=count, default=None,
+                        help="CPU devices JAX presents (default: one per core); also Brian2's processes")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def main(args: argparse.Namespace) -> int:
+def run(*, trials: int | None = None, out: str | None = None, duration: float | None = None,
+        seed: int | None = None, repeats: int | None = None, randomize: bool = False,
+        brian2_target: str | None = None, network: bool = True, cpu_devices: int | None = None,
+        no_progress: bool = False) -> int:
     """``spikejax bench robobee``: the closed-loop table, then the network-alone table.
 
-    Reads from ``args`` (each optional): ``trials`` (the largest batch of
-    flights; default: every batch of `BATCHES`), ``out`` (a directory for
-    ``bench_robobee.csv``, and ``bench_robobee_network.csv`` from the network
-    table), ``duration`` (simulated seconds of a spikejax flight, default 2.5),
-    ``seed`` (default 0), ``repeats`` (timed runs per row, Brian2's and
-    spikejax's, the fastest kept; default 3), ``randomize`` (also fly randomized robots at the largest
-    batch), ``brian2_target`` (``"cython"``, the default, or ``"numpy"``),
-    ``network`` (False skips the network-alone table) and ``cpu_devices`` (the
-    CPU devices JAX presents, default one per core; set before JAX starts).
+    Args:
+        trials: the largest batch of flights (default: every batch of `BATCHES`).
+        out: a directory for ``bench_robobee.csv`` (and ``bench_robobee_network.csv``
+            from the network table); None: print only.
+        duration: simulated seconds of a flight (default 2.5).
+        seed: network seed (default 0).
+        repeats: timed rounds, Brian2's and spikejax's, the best kept (default 3).
+        randomize: also fly randomized robots at the largest batch.
+        brian2_target: ``"cython"`` (the default) or ``"numpy"``.
+        network: then run the network-alone table (`robots.robobee.bench_network.run`).
+        cpu_devices: the CPU devices JAX presents, default one per core (set
+            before JAX starts).
+        no_progress: hide the progress bar.
 
-    Brian2 runs in fresh processes of its own (`run_isolated`): one flight on
-    one core (the paper's setup, the ``x Brian2`` reference), then as many
-    flights side by side as there are devices (`run_brian2_on_all_cores`, the
-    ``x Brian2 on all cores`` reference). Each spikejax batch runs on one
-    device, and, from a batch of one flight per device on, also split over all devices.
+    Brian2 runs in fresh processes of its own: one flight on one core (the
+    paper's setup, the ``x Brian2`` reference), then as many flights side by
+    side as there are devices (`run_brian2_on_all_cores`, the ``x Brian2 on
+    all cores`` reference). Each spikejax batch runs on one device, and, from
+    a batch of one flight per device on, also split over all devices.
     """
-    n_dev = cpu_devices_for_run(getattr(args, "cpu_devices", None))
-    duration = float(getattr(args, "duration", None) or FLIGHT_S)
-    seed = int(getattr(args, "seed", None) or 0)
-    repeats = int(getattr(args, "repeats", None) or 3)
-    batches = _batches(getattr(args, "trials", None))
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"{n_dev} x {jax.devices()[0].platform}, jax {jax.__version__}")
+    n_dev = cpu_devices_for_run(cpu_devices)
+    duration = FLIGHT_S if duration is None else duration
+    seed = 0 if seed is None else seed
+    repeats = 3 if repeats is None else repeats
+    brian2_target = "cython" if brian2_target is None else brian2_target
+    if repeats < 1:
+        raise UserError(f"--repeats must be >= 1, not {repeats}")
+    batches = batch_sizes(trials, BATCHES)
+    print(machine_banner(n_dev))
     hold, segment = flight_steps(duration)
     print(f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "
           f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
           f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
-    brian2_target = getattr(args, "brian2_target", None) or "cython"
-    runs = [lambda: run_isolated(run_brian2_closed_loop, duration, seed, brian2_target, flight_s=duration,
-                                 repeats=repeats)]
-    if n_dev > 1:
-        runs.append(lambda: run_brian2_on_all_cores(n_dev, duration, seed, brian2_target, flight_s=duration,
-                                                    repeats=repeats))
-    for b in batches:
-        for d in [1] + ([n_dev] if n_dev > 1 and b >= n_dev else []):
-            runs.append(lambda b=b, d=d: run_spikejax_flights(b, duration, seed, repeats=repeats, devices=d))
-    if getattr(args, "randomize", False):
-        runs.append(lambda: run_spikejax_flights(max(batches), duration, seed, randomize_robots=True, repeats=repeats,
-                                                 devices=n_dev))
-    rows = []
-    for run in runs:
-        try:
-            r = run()
-        except ImportError as err:
-            print(f"  skipped: {err}")
-            continue
-        rows.append(r)
-        extra = (f", of which network_operation {r['op_s']:.2f} s and Network.run's preparation about "
+    from tqdm import tqdm
+
+    with contextlib.ExitStack() as stack:
+        runs, infos = {}, {}
+        for processes in [1] + ([n_dev] if n_dev > 1 else []):
+            try:
+                runs["brian2", processes] = stack.enter_context(
+                    Processes(Brian2FlightRun, *_brian2_args(duration, seed, brian2_target, duration),
+                              processes=processes))
+            except ImportError as err:
+                print(f"  skipped: {err}")
+                break
+        jobs = [dict(batch=b, devices=d) for b in batches for d in [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])]
+        if randomize:
+            jobs.append(dict(batch=max(batches), randomize_robots=True, devices=n_dev))
+        for job in tqdm(jobs, desc="robobee bench: compiling", disable=no_progress):
+            timer, info = _spikejax_flights(duration=duration, seed=seed, **job)
+            runs["spikejax", len(runs)] = timer
+            infos[len(runs) - 1] = info
+        bar = tqdm(total=len(runs) * repeats, desc="robobee bench: timing", disable=no_progress)
+        best = interleaved(runs, repeats, progress=lambda _: bar.update())
+        bar.close()
+        rows = []
+        for key, runner in runs.items():
+            if key[0] == "brian2":
+                got = runner.info()
+                rows.append(_brian2_row(got[0], duration, duration, processes=key[1],
+                                        build_s=max(i["build_s"] for i in got), run_s=best[key]))
+            else:
+                rows.append(_flights_row(infos[key[1]], best[key], runner.result))
+    for r in rows:
+        extra = (f", of which network_operation {r['op_s']:.2f} s (first run) and Network.run's preparation about "
                  f"{r['prepare_s']:.2f} s" if "op_s" in r else "")
         print(f"  {r['impl']}, batch {r['batch']}: {r['flights_per_s']:.3g} flights/s (timed {r['timed_s']:g} s "
-              f"per flight, run {r['run_s']:.2f} s{extra})", flush=True)
+              f"per flight, run {r['run_s']:.2f} s{extra})")
     brian2 = [r for r in rows if r["impl"].startswith("Brian2")]
     one = brian2[0]["flights_per_s"] if brian2 else math.nan
     every = brian2[-1]["flights_per_s"] if brian2 else math.nan
@@ -717,29 +477,27 @@ def main(args: argparse.Namespace) -> int:
         r["x_brian2"] = r["flights_per_s"] / one
         r["x_brian2_all_cores"] = r["flights_per_s"] / every
     print()
-    print("| implementation | batch | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
+    print("| implementation | batch | cores | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
           f"simulated s / s | neuron updates/s | x Brian2 | x Brian2 on {n_dev} cores | reached q1, q2 |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         reached = "-" if math.isnan(r["reached_q1"]) else f"{r['reached_q1']:.0%}, {r['reached_q2']:.0%}"
-        print(f"| {r['impl']} | {r['batch']} | {r['build_or_compile_s']:.2f} | {r['timed_s'] * r['batch']:g} | "
-              f"{r['run_s']:.2f} | {r['flights_per_s']:.4g} | {r['sim_s_per_wall_s']:.3g} | "
-              f"{r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | {r['x_brian2_all_cores']:.1f} | "
-              f"{reached} |")
+        print(f"| {r['impl']} | {r['batch']} | {r['cores']} ({r['parallel']}) | {r['build_or_compile_s']:.2f} | "
+              f"{r['timed_s'] * r['batch']:g} | {r['run_s']:.2f} | {r['flights_per_s']:.4g} | "
+              f"{r['sim_s_per_wall_s']:.3g} | {r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | "
+              f"{r['x_brian2_all_cores']:.1f} | {reached} |")
     print(f"(flights of {duration:g} s; timed: simulated seconds actually run (flights x timed length), the "
-          "throughputs extrapolated from them; run: the fastest of "
-          f"{repeats}; reached: within {REACHED_M * 1e3:g} mm of each waypoint at the end of its leg; Brian2 flies "
-          f"one flight on one core, or {n_dev} side by side in {n_dev} processes; spikejax rows on one device unless "
-          "they say so)")
-    if getattr(args, "out", None):
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        with open(out / "bench_robobee.csv", "w", newline="") as file:
-            writer = csv.DictWriter(file, fieldnames=[*ROW_FIELDS, "devices", "x_brian2", "x_brian2_all_cores"],
-                                    extrasaction="ignore", restval=1)
-            writer.writeheader()
-            writer.writerows(rows)
-    if getattr(args, "network", True) is not False:
+          f"throughputs extrapolated from them; run: the best of {repeats} interleaved rounds; reached: within "
+          f"{REACHED_M * 1e3:g} mm of each waypoint at the end of its leg; Brian2 flies one flight on one core, or "
+          f"{n_dev} side by side in {n_dev} processes; a row on 1 core compares with x Brian2, a row on {n_dev} "
+          f"with x Brian2 on {n_dev} cores)")
+    if out:
+        write_csv(Path(out) / "bench_robobee.csv", rows, COLUMNS)
+    if network:
         print()
-        bench_network.main_network(argparse.Namespace(out=getattr(args, "out", None)))
+        bench_network.run(out=out, no_progress=no_progress)
     return 0
+
+
+command = Command(help="closed-loop RoboBee flights per second, spikejax against Brian2",
+                  add_arguments=_add_arguments, run=run, description=__doc__.splitlines()[0])

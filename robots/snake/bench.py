@@ -5,39 +5,44 @@ of the snake R-STDP paper), i.e. `robots.snake.physics.make_physics`'s
 ``substeps`` physics steps (5 of 4 ms with the tuned model). Three
 implementations are timed in the same run, at batch sizes 1 to 1024:
 
-- ``MuJoCo C physics only``: the peer. ``mujoco.rollout`` on a persistent
-  pool of one thread per CPU core steps the batch through the same MJCF and
-  the same servo targets (the gait's, computed beforehand), nothing else.
+- ``MuJoCo C physics only``: the peer. ``mujoco.rollout`` steps the batch
+  through the same MJCF and the same servo targets (the gait's, computed
+  beforehand), nothing else: on one thread, and on a persistent pool of one
+  thread per CPU core (MuJoCo C's own parallelism, ``--threads``).
 - ``mujoco backend closed loop``: ``jax.jit(jax.vmap(run))`` where ``run`` is
   a ``lax.scan`` of env steps, each evaluating the gait (Eq. (1), steering,
   head compensation) in JAX, stepping the physics through the ``"mujoco"``
   backend's callback, then moving the target, rendering the head camera and
-  making its events in JAX.
+  making its events in JAX; the backend's C engine on one thread, and on
+  one thread per core.
 - ``mjx backend closed loop``: the same program with the ``"mjx"`` backend,
-  each batch in a fresh process (`robots.common.run_isolated`): in a process
-  where MuJoCo's rollout threads had run, an MJX batch of 256 never returned.
+  each batch in a fresh process (`spikejax.benchmarking.Processes`): in a
+  process where MuJoCo's rollout threads had run, an MJX batch of 256 never returned.
   On a CPU only batches up to `MJX_CPU_MAX_BATCH` are timed: batches of 256
   hung intermittently there even in a fresh process.
 
-The closed loops time :class:`robots.snake.env.SnakeEnv`'s ``step`` on the
+The closed loops time `robots.snake.env.SnakeEnv`'s ``step`` on the
 8-shaped track: the gait, the physics, the target's motion, the head camera's
 128 x 128 frame and its frame-difference DVS events, for every snake.
 
 Compile time (``lower(...).compile()``) is reported apart from run time (the
-fastest of ``repeats`` runs). Each row also gives the simulated seconds per
+fastest of ``--repeats`` runs; the implementations of a batch are timed once a
+round, `spikejax.benchmarking.interleaved`). ``vs_c_physics`` is a row's
+env-steps/s over the C physics' at the same batch on as many cores (``cores``:
+one thread, or one a core). Each row also gives the simulated seconds per
 wall-clock second and how long one training episode of the paper (151,093
 control steps, 3,021.86 s simulated, Sec. III-A) takes at that throughput,
 one episode per snake of the batch.
 
-``main`` writes ``snake.csv`` and ``snake.png`` to ``--out``.
+`run` writes ``snake.csv`` and ``snake.png`` to ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
-import platform
 import time
 from pathlib import Path
 
@@ -47,13 +52,21 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from robots.common import run_isolated
-from robots.common import write_csv
-from robots.snake.env import SnakeEnv
-from robots.snake.gait import gait_params
-from robots.snake.gait import joint_targets
-from robots.snake.physics import make_physics
+from spikejax.benchmarking import Processes
+from spikejax.benchmarking import add_ratios
+from spikejax.benchmarking import compile_ahead
+from spikejax.benchmarking import cores_label
+from spikejax.benchmarking import interleaved
+from spikejax.benchmarking import machine_banner
+from spikejax.benchmarking import plot_rows
+from spikejax.benchmarking import write_csv
+from spikejax.commands import Command
+from spikejax.commands import count
 from spikejax.errors import UserError
+
+# The snake's modules are imported where they are used: they make JAX arrays when
+# imported, which would start JAX before another bench of ``spikejax bench``
+# (all are loaded to build the command line) presents the CPU as several devices.
 
 __all__ = [
     "BATCHES",
@@ -61,9 +74,12 @@ __all__ = [
     "EPISODE_SECONDS",
     "QUICK_BATCHES",
     "ROW_FIELDS",
+    "CPhysicsRun",
+    "ClosedLoopRun",
     "bench_c_physics",
     "bench_closed_loop",
-    "main",
+    "command",
+    "run",
 ]
 
 BATCHES = (1, 4, 16, 64, 256, 512, 1024)
@@ -79,19 +95,20 @@ MJX_CPU_MAX_BATCH = 64
 LOOP = "env step (physics + camera + events)"
 
 ROW_FIELDS = ("impl", "loop", "batch", "control_steps", "compile_s", "run_s", "env_steps_per_s",
-              "physics_steps_per_s", "sim_s_per_wall_s", "vs_c_physics", "episode_wall_s")
+              "physics_steps_per_s", "sim_s_per_wall_s", "vs_c_physics", "episode_wall_s", "cores", "parallel")
 
 
 def _control_steps(batch: int, substeps: int, budget: int) -> int:
     return max(MIN_CONTROL_STEPS, budget // (batch * substeps))
 
 
-def _row(impl, loop, batch, n, compile_s, run_s, substeps, control_dt) -> dict:
+def _row(impl, loop, batch, n, compile_s, run_s, substeps, control_dt, threads) -> dict:
     env_steps = batch * n / run_s
     return dict(impl=impl, loop=loop, batch=batch, control_steps=n, compile_s=compile_s, run_s=run_s,
                 env_steps_per_s=env_steps, physics_steps_per_s=env_steps * substeps,
                 sim_s_per_wall_s=env_steps * control_dt, vs_c_physics=math.nan,
-                episode_wall_s=EPISODE_STEPS * batch / env_steps)
+                episode_wall_s=EPISODE_STEPS * batch / env_steps, cores=threads,
+                parallel=cores_label(threads, "thread"))
 
 
 def _steers(batch: int) -> np.ndarray:
@@ -99,38 +116,73 @@ def _steers(batch: int) -> np.ndarray:
     return np.linspace(-0.1, 0.1, batch) if batch > 1 else np.zeros(1)
 
 
+class CPhysicsRun:
+    """MuJoCo C alone as a benchmark timer: ``mujoco.rollout`` of ``batch`` snakes for ``n`` control steps.
+
+    The servo targets are precomputed; ``nthread`` threads (1: no pool) step
+    the batch. Each call is one rollout and returns its seconds; `info` is
+    the row (``run_s``: the fastest call). `close` ends the thread pool.
+    """
+
+    def __init__(self, batch: int, n: int, *, nthread: int = 1):
+        from robots.snake.gait import gait_params
+        from robots.snake.gait import joint_targets
+        from robots.snake.physics import make_physics
+
+        phys = make_physics("mujoco")
+        self.model, self.phys, self.batch, self.n = phys.mj_model, phys, batch, n
+        gait = gait_params()
+        times = jnp.arange(n) * phys.dt * phys.substeps
+        targets = jax.jit(jax.vmap(lambda s: jax.vmap(lambda t: joint_targets(gait, t, s))(times)))(_steers(batch))
+        self.control = np.repeat(np.asarray(targets, np.float64), phys.substeps, axis=1)  # (batch, n * substeps, 16)
+        data = mujoco.MjData(self.model)
+        state = np.zeros((batch, mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
+        mujoco.mj_getState(self.model, data, state[0], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        state[:] = state[0]
+        self.state = state
+        self.threads = nthread if batch >= nthread and nthread > 1 else 0
+        self.datas = [mujoco.MjData(self.model) for _ in range(max(self.threads, 1))]
+        self.out = np.empty((batch, n * phys.substeps, state.shape[1]))
+        self.pool = mj_rollout.Rollout(nthread=self.threads)
+        self.pool.__enter__()
+        self.run_s = math.inf
+
+    def __call__(self) -> float:
+        t0 = time.perf_counter()
+        self.pool.rollout([self.model] * self.batch, self.datas, self.state, self.control, state=self.out,
+                          chunk_size=max(1, self.batch // max(self.threads, 1)))
+        seconds = time.perf_counter() - t0
+        if not np.all(np.isfinite(self.out[:, -1])):
+            raise RuntimeError("MuJoCo C rollout diverged")
+        self.run_s = min(self.run_s, seconds)
+        return seconds
+
+    @property
+    def info(self) -> dict:
+        threads, phys = max(self.threads, 1), self.phys
+        return _row("MuJoCo C physics only", f"physics only, {threads} thread(s)", self.batch, self.n, 0.0,
+                    self.run_s, phys.substeps, phys.dt * phys.substeps, threads)
+
+    def close(self) -> None:
+        self.pool.__exit__(None, None, None)
+
+
 def bench_c_physics(batch: int, n: int, *, nthread: int | None = None, repeats: int = 2) -> dict:
-    """MuJoCo C alone: ``mujoco.rollout`` of ``batch`` snakes for ``n`` control steps, servo targets precomputed."""
-    phys = make_physics("mujoco")
-    model = phys.mj_model
-    nthread = nthread or os.cpu_count() or 1
-    gait = gait_params()
-    times = jnp.arange(n) * phys.dt * phys.substeps
-    targets = jax.jit(jax.vmap(lambda s: jax.vmap(lambda t: joint_targets(gait, t, s))(times)))(_steers(batch))
-    control = np.repeat(np.asarray(targets, np.float64), phys.substeps, axis=1)  # (batch, n * substeps, 16)
-    data = mujoco.MjData(model)
-    state = np.zeros((batch, mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
-    mujoco.mj_getState(model, data, state[0], mujoco.mjtState.mjSTATE_FULLPHYSICS)
-    state[:] = state[0]
-    threads = nthread if batch >= nthread and nthread > 1 else 0
-    datas = [mujoco.MjData(model) for _ in range(max(threads, 1))]
-    out = np.empty((batch, n * phys.substeps, state.shape[1]))
-    run_s = math.inf
-    with mj_rollout.Rollout(nthread=threads) as pool:
+    """MuJoCo C alone (`CPhysicsRun`, ``nthread`` threads, default one per core), the fastest of ``repeats``."""
+    run = CPhysicsRun(batch, n, nthread=nthread or os.cpu_count() or 1)
+    try:
         for _ in range(repeats):
-            t0 = time.perf_counter()
-            pool.rollout([model] * batch, datas, state, control, state=out,
-                         chunk_size=max(1, batch // max(threads, 1)))
-            run_s = min(run_s, time.perf_counter() - t0)
-    if not np.all(np.isfinite(out[:, -1])):
-        raise RuntimeError("MuJoCo C rollout diverged")
-    loop = f"physics only, {max(threads, 1)} thread(s)"
-    return _row("MuJoCo C physics only", loop, batch, n, 0.0, run_s, phys.substeps, phys.dt * phys.substeps)
+            run()
+        return run.info
+    finally:
+        run.close()
 
 
-def _env_run(backend: str):
+def _env_run(backend: str, nthread: int | None = None):
     """The closed loop timed: ``SnakeEnv.step`` (gait, physics, target, head camera, DVS events) in a ``lax.scan``."""
-    env = SnakeEnv("eight", backend)
+    from robots.snake.env import SnakeEnv
+
+    env = SnakeEnv("eight", backend, **({} if nthread is None else dict(nthread=nthread)))
 
     def run(key, steer, n):
         action = jnp.zeros(env.action_size).at[0].set(steer)
@@ -144,67 +196,93 @@ def _env_run(backend: str):
     return env, run
 
 
-def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2) -> dict:
-    """``jax.jit(jax.vmap(run))`` of ``batch`` snake envs for ``n`` control steps with ``backend``; compile apart."""
-    env, run = _env_run(backend)
-    phys = env.physics
-    keys = jax.random.split(jax.random.key(0), batch)
-    steers = jnp.asarray(_steers(batch) / float(env.params.max_steer), jnp.float32)
-    fn = jax.jit(jax.vmap(lambda k, s: run(k, s, n)))
-    t0 = time.perf_counter()
-    compiled = fn.lower(keys, steers).compile()
-    compile_s = time.perf_counter() - t0
-    run_s = math.inf
-    for _ in range(repeats):
+class ClosedLoopRun:
+    """``jax.jit(jax.vmap(run))`` of ``batch`` snake envs for ``n`` control steps with ``backend``, as a timer.
+
+    Compiled ahead at construction (``compile_s``); each call runs it once and
+    returns its seconds, checking the result (finite observations, events in
+    every snake's last step). ``nthread``: the C engine's threads
+    (``"mujoco"``; None: one per core); `info` is the row.
+    """
+
+    def __init__(self, backend: str, batch: int, n: int, nthread: int | None = None):
+        env, run = _env_run(backend, nthread)
+        self.backend, self.batch, self.n, self.phys = backend, batch, n, env.physics
+        self.threads = (nthread or os.cpu_count() or 1) if backend == "mujoco" else 1
+        keys = jax.random.split(jax.random.key(0), batch)
+        steers = jnp.asarray(_steers(batch) / float(env.params.max_steer), jnp.float32)
+        self.compiled, self.compile_s = compile_ahead(jax.vmap(lambda k, s: run(k, s, n)), keys, steers)
+        self.args = (keys, steers)
+        self.run_s = math.inf
+
+    def __call__(self) -> float:
         t0 = time.perf_counter()
-        obs, events = jax.block_until_ready(compiled(keys, steers))
-        run_s = min(run_s, time.perf_counter() - t0)
-    if not bool(jnp.all(jnp.isfinite(obs))):
-        raise RuntimeError(f"{backend} closed loop produced non-finite values")
-    if not bool(jnp.all(events > 0)):
-        raise RuntimeError(f"{backend} closed loop: a snake's camera saw no events in its last step")
-    return _row(f"{backend} backend closed loop", LOOP, batch, n, compile_s, run_s, phys.substeps,
-                phys.dt * phys.substeps)
+        obs, events = jax.block_until_ready(self.compiled(*self.args))
+        seconds = time.perf_counter() - t0
+        if not bool(jnp.all(jnp.isfinite(obs))):
+            raise RuntimeError(f"{self.backend} closed loop produced non-finite values")
+        if not bool(jnp.all(events > 0)):
+            raise RuntimeError(f"{self.backend} closed loop: a snake's camera saw no events in its last step")
+        self.run_s = min(self.run_s, seconds)
+        return seconds
+
+    @property
+    def info(self) -> dict:
+        phys = self.phys
+        return _row(f"{self.backend} backend closed loop", LOOP, self.batch, self.n, self.compile_s, self.run_s,
+                    phys.substeps, phys.dt * phys.substeps, self.threads)
+
+
+def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2, nthread: int | None = None) -> dict:
+    """`ClosedLoopRun`, the fastest of ``repeats`` runs; compile apart."""
+    run = ClosedLoopRun(backend, batch, n, nthread)
+    for _ in range(repeats):
+        run()
+    return run.info
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for impl in dict.fromkeys(r["impl"] for r in rows):
-        sel = [r for r in rows if r["impl"] == impl]
-        ax.plot([r["batch"] for r in sel], [r["env_steps_per_s"] for r in sel], "o-", label=impl)
-    ax.set_xscale("log", base=2)
-    ax.set_yscale("log")
-    ax.set_xlabel("batch (snakes)")
-    ax.set_ylabel("env-steps/s (20 ms control steps)")
-    ax.set_title("snake: throughput, compile time excluded")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    plot_rows(rows, path, x="batch", y="env_steps_per_s", series=lambda r: f"{r['impl']}, {r['parallel']}",
+              xbase=2, size=(6, 4), xlabel="batch (snakes)", ylabel="env-steps/s (20 ms control steps)",
+              title="snake: throughput, compile time excluded")
 
 
-def main(args: argparse.Namespace) -> int:
-    """``spikejax bench snake [--trials N] [--out DIR]``; ``args.quick`` (if set) times a batch of 2 without MJX.
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--trials", type=count, default=None, help="the largest batch of snakes (default 1024)")
+    parser.add_argument("--out", default=None, help="write snake.csv and snake.png here")
+    parser.add_argument("--quick", action="store_true", help="a batch of 2, a short run, no MJX")
+    parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 2)")
+    parser.add_argument("--threads", type=count, default=None,
+                        help="MuJoCo C threads of the all-cores rows (default: one per core)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
-    ``--trials`` caps the batch sizes timed (default: up to 1024).
+
+def run(*, trials: int | None = None, out: str | None = None, quick: bool = False, repeats: int | None = None,
+        threads: int | None = None, no_progress: bool = False) -> int:
+    """``spikejax bench snake``: print the table; write ``snake.csv`` and ``snake.png`` to ``out``.
+
+    Args:
+        trials: caps the batch sizes timed (default: up to 1024).
+        out: a directory for the table and figure (None: print only).
+        quick: time a batch of 2, briefly, without MJX.
+        repeats: timed rounds per batch, the best kept (default 2; MJX's rows 1).
+        threads: MuJoCo C's threads in the all-cores rows, the peer's and the
+            ``"mujoco"`` backend's (default: one per core); the one-core rows use one thread.
+        no_progress: hide the progress bar.
     """
-    quick = bool(getattr(args, "quick", False))
     batches = QUICK_BATCHES if quick else BATCHES
-    if args.trials is not None:
-        if args.trials < 1:
-            raise UserError(f"--trials must be at least 1, got {args.trials}")
-        batches = tuple(b for b in batches if b <= args.trials) or (args.trials,)
+    if trials is not None:
+        if trials < 1:
+            raise UserError(f"--trials must be at least 1, got {trials}")
+        batches = tuple(b for b in batches if b <= trials) or (trials,)
+    repeats = 2 if repeats is None else repeats
+    every = (os.cpu_count() or 1) if threads is None else threads
     backends = ("mujoco",) if quick else ("mujoco", "mjx")
     c_budget = 2_000 if quick else C_BUDGET
+    from robots.snake.physics import make_physics
+
     phys = make_physics("mujoco")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"{jax.device_count()} x {jax.devices()[0].platform}, jax {jax.__version__}, mujoco {mujoco.__version__}")
+    print(machine_banner(mujoco=mujoco.__version__))
     print(f"snake (17 modules, tuned model): control step {phys.dt * phys.substeps * 1e3:.0f} ms = "
           f"{phys.substeps} x {phys.dt * 1e3:.0f} ms physics steps; the paper's episode: {EPISODE_STEPS:,} "
           f"control steps, {EPISODE_SECONDS:,} s simulated")
@@ -216,36 +294,46 @@ def main(args: argparse.Namespace) -> int:
         if mjx_batches != batches:
             print(f"mjx on a CPU: batches above {MJX_CPU_MAX_BATCH} skipped (they can hang there, "
                   f"docs/ARCHITECTURE.md; and run at a few hundred env-steps/s)")
-    jobs = [("c", b) for b in batches] + [("mujoco", b) for b in batches if "mujoco" in backends]
-    jobs += [("mjx", b) for b in mjx_batches if "mjx" in backends]
     rows = []
-    bar = tqdm(jobs, desc="snake bench", disable=getattr(args, "no_progress", False))
-    for kind, batch in bar:
-        if kind == "c":
-            row = bench_c_physics(batch, _control_steps(batch, phys.substeps, c_budget))
-        else:
-            budget = MJX_BUDGET if kind == "mjx" else c_budget
-            n = _control_steps(batch, phys.substeps, budget)
-            if kind == "mjx":  # in a fresh process: see the module docstring
-                row = run_isolated(bench_closed_loop, kind, batch, n, repeats=1)
-            else:
-                row = bench_closed_loop(kind, batch, n)
-        rows.append(row)
-        bar.write(f"  {row['impl']}, batch {batch}: {row['env_steps_per_s']:,.0f} env-steps/s "
-                  f"(compile {row['compile_s']:.1f} s)")
-    c_rate = {r["batch"]: r["env_steps_per_s"] for r in rows if r["impl"].startswith("MuJoCo C")}
+    bar = tqdm(batches, desc="snake bench", disable=no_progress)
+    for batch in bar:
+        counts = [1] + ([every] if every > 1 and batch >= every else [])
+        n_c = _control_steps(batch, phys.substeps, c_budget)
+        with contextlib.ExitStack() as stack:
+            runs = {}
+            for t in counts:
+                runs["c", t] = CPhysicsRun(batch, n_c, nthread=t)
+                stack.callback(runs["c", t].close)
+            if "mujoco" in backends:
+                for t in counts:
+                    runs["mujoco", t] = ClosedLoopRun("mujoco", batch, n_c, t)
+            interleaved(runs, repeats)  # each run keeps its best in its row
+            new = [r.info for r in runs.values()]
+            if "mjx" in backends and batch in mjx_batches:  # in a fresh process: see the module docstring
+                n = _control_steps(batch, phys.substeps, MJX_BUDGET)
+                with Processes(ClosedLoopRun, "mjx", batch, n) as mjx:
+                    mjx()
+                    new.append(mjx.info()[0])
+        for r in new:
+            bar.write(f"  {r['impl']}, batch {batch}, {r['parallel']}: {r['env_steps_per_s']:,.0f} env-steps/s "
+                      f"(compile {r['compile_s']:.1f} s)")
+        rows.extend(new)
+    add_ratios(rows, "vs_c_physics", "env_steps_per_s",
+               lambda p, r: p["impl"].startswith("MuJoCo C") and p["batch"] == r["batch"])
+    print(f"{'implementation':34s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} {'env-steps/s':>11s} "
+          f"{'sim s/s':>8s} {'vs C':>6s} {'episode':>9s}")
     for r in rows:
-        r["vs_c_physics"] = r["env_steps_per_s"] / c_rate[r["batch"]]
-    print(f"{'implementation':34s} {'batch':>5s} {'compile s':>9s} {'env-steps/s':>11s} {'sim s/s':>8s} "
-          f"{'vs C':>6s} {'episode':>9s}")
-    for r in rows:
-        print(f"{r['impl']:34s} {r['batch']:5d} {r['compile_s']:9.1f} {r['env_steps_per_s']:11,.0f} "
+        print(f"{r['impl']:34s} {r['batch']:5d} {r['cores']:5d} {r['compile_s']:9.1f} {r['env_steps_per_s']:11,.0f} "
               f"{r['sim_s_per_wall_s']:8.1f} {r['vs_c_physics']:6.2f} {r['episode_wall_s']:8.0f}s")
-    print(f"  loop timed: {rows[-1]['loop']}; episode: wall time of one {EPISODE_STEPS:,}-step episode per snake")
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        write_csv(out / "snake.csv", list(ROW_FIELDS), [[r[k] for k in ROW_FIELDS] for r in rows])
+    print(f"  loop timed: {LOOP}; vs C: against the C physics at the same batch on as many threads; "
+          f"episode: wall time of one {EPISODE_STEPS:,}-step episode per snake")
+    if out:
+        out = Path(out)
+        write_csv(out / "snake.csv", rows, ROW_FIELDS)
         _plot(rows, out / "snake.png")
         print(f"wrote {out / 'snake.csv'} and {out / 'snake.png'}")
     return 0
+
+
+command = Command(help="snake env-steps per second, both physics backends against MuJoCo C",
+                  add_arguments=_add_arguments, run=run, description=__doc__.splitlines()[0])
