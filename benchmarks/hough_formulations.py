@@ -8,16 +8,19 @@ and the ratio of each round is printed with the median over ``--rounds``.
 * votes only: :func:`hough.line_votes`, ``vmap`` over streams and slots, vs
   ``skimage.transform.hough_line`` (the bare accumulator, 180 angles) on the
   same frames (frames/s);
-* whole detector, synchronous: ``vmap`` of :func:`hough.sync_run` over streams
+* whole detector, synchronous: ``vmap`` of `spikejax.vision.hough.sync_run` over streams
   (votes + bipolar LIF + 3 x 3 inhibition, one slot a frame), vs the same
   ``hough_line`` (frames/s);
-* asynchronous: ``vmap`` of :func:`hough.async_run` over distinct streams (each
+* asynchronous: ``vmap`` of `spikejax.vision.hough.async_run` over distinct streams (each
   a different order and mirror image of the frames), vs the NumPy per-event
   loop of `spikejax.commands.bench_hough` (events/s).
 
-``--baseline FILE`` adds the same rows for another version of ``hough.py``
-(e.g. ``git show COMMIT:spikejax/vision/hough.py > /tmp/old_hough.py``) and
-checks that it gives the same spikes and potentials.
+``--baseline FILE`` adds the same rows for a one-file version of the Hough
+module, as it was before it became the package `spikejax.vision.hough`
+(``git show 575fe44:spikejax/vision/hough.py > /tmp/old_hough.py``), and
+checks that it gives the same spikes and potentials. (The package's own fast
+path is pinned to its readable Alg. 1, `spikejax.vision.hough.neuron`, by
+``tests/test_hough.py``.)
 
 Usage::
 
@@ -36,9 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from skimage.transform import hough_line
 
-from spikejax.benchmarking import JaxRun
-from spikejax.benchmarking import interleaved
-from spikejax.benchmarking import machine_banner
+from spikejax.benchmarking import JaxRun, interleaved, machine_banner
 from spikejax.commands import bench_hough
 from spikejax.vision import hough
 
@@ -84,7 +85,7 @@ def main(argv=None) -> int:
     parser.add_argument("--async-slots", type=int, default=1, help="slots (frames) per async stream")
     parser.add_argument("--rounds", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--baseline", help="another hough.py to compare with")
+    parser.add_argument("--baseline", help="a one-file hough.py of an earlier version to compare with")
     args = parser.parse_args(argv)
 
     events, images = bench_hough.frames("line")
@@ -96,8 +97,10 @@ def main(argv=None) -> int:
     a_streams = _distinct_streams(events, args.async_batch, args.async_slots)
     a_events = float(a_streams.valid.sum())
     print(machine_banner())
-    print(f"{float(events.count().mean()):.0f} events a frame; "
-          f"sync batch {args.batch} x {n_slots} frames, async batch {args.async_batch} x {args.async_slots} frames")
+    print(
+        f"{float(events.count().mean()):.0f} events a frame; "
+        f"sync batch {args.batch} x {n_slots} frames, async batch {args.async_batch} x {args.async_slots} frames"
+    )
 
     sync_cands = {"skimage hough_line": (lambda: [hough_line(im, thetas) for im in images], len(images))}
     async_cands = {}
@@ -139,8 +142,10 @@ def main(argv=None) -> int:
     print(f"NumPy per-event loop: {np.median(loop) / 1e6:.3f} M events/s (median of {args.rounds})")
     for k, r in rates.items():
         ratio = [a / b for a, b in zip(r, loop)]
-        print(f"{k:30s} {' '.join(f'{x:5.1f}' for x in ratio):27s} {np.median(ratio):5.1f} x the NumPy loop, "
-              f"{np.median(r) / 1e6:.3f} M events/s")
+        print(
+            f"{k:30s} {' '.join(f'{x:5.1f}' for x in ratio):27s} {np.median(ratio):5.1f} x the NumPy loop, "
+            f"{np.median(r) / 1e6:.3f} M events/s"
+        )
     return 0
 
 

@@ -29,8 +29,9 @@ def sweep_file(name: str) -> Traversable:
     return file
 
 
-def run_named_sweep(name: str, out: Path, *, trials: int | None = None, chunk_size: int | None = None,
-                    progress: bool = True) -> dict[str, np.ndarray]:
+def run_named_sweep(
+    name: str, out: Path, *, trials: int | None = None, chunk_size: int | None = None, progress: bool = True
+) -> dict[str, np.ndarray]:
     """Run (or resume) the shipped sweep ``NAME.toml`` into ``out/sweeps/NAME`` and return its table.
 
     Args:

@@ -67,8 +67,10 @@ def machine_banner(devices: int | None = None, **versions: str) -> str:
     """
     devices = jax.device_count() if devices is None else devices
     extra = "".join(f", {name} {version}" for name, version in versions.items())
-    return (f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-            f"{devices} x {jax.devices()[0].platform}, jax {jax.__version__}{extra}")
+    return (
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"{devices} x {jax.devices()[0].platform}, jax {jax.__version__}{extra}"
+    )
 
 
 def cores_label(n: int, unit: str) -> str:
@@ -116,8 +118,9 @@ class JaxRun:
         return seconds
 
 
-def interleaved(runs: dict[str, Callable[[], float]], rounds: int,
-                progress: Callable[[str], None] | None = None) -> dict[str, float]:
+def interleaved(
+    runs: dict[str, Callable[[], float]], rounds: int, progress: Callable[[str], None] | None = None
+) -> dict[str, float]:
     """The best seconds of each run over ``rounds`` rounds; round ``r`` calls every run once, in order.
 
     Args:
@@ -172,8 +175,7 @@ class Processes:
     that is not installed) is raised by the constructor.
     """
 
-    def __init__(self, factory: Callable, *args: Any, processes: int = 1, index_arg: str | None = None,
-                 **kwargs: Any):
+    def __init__(self, factory: Callable, *args: Any, processes: int = 1, index_arg: str | None = None, **kwargs: Any):
         context = multiprocessing.get_context("spawn")
         barrier = context.Barrier(processes) if processes > 1 else None
         self.processes = processes
@@ -275,10 +277,22 @@ def write_csv(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> Path:
     return path
 
 
-def plot_rows(rows: list[dict], path: Path, *, x: str, y: str, series: Callable[[dict], str],
-              xlabel: str, ylabel: str, title: str | Callable[[Any], str], panel: str | None = None,
-              flat: Callable[[dict], bool] | None = None, lines: Callable[[Any], list[tuple[float, str]]] | None = None,
-              xbase: int = 10, size: tuple[float, float] | None = None) -> Path:
+def plot_rows(
+    rows: list[dict],
+    path: Path,
+    *,
+    x: str,
+    y: str,
+    series: Callable[[dict], str],
+    xlabel: str,
+    ylabel: str,
+    title: str | Callable[[Any], str],
+    panel: str | None = None,
+    flat: Callable[[dict], bool] | None = None,
+    lines: Callable[[Any], list[tuple[float, str]]] | None = None,
+    xbase: int = 10,
+    size: tuple[float, float] | None = None,
+) -> Path:
     """One log-log figure of ``y`` against ``x``: a line per ``series``, a panel per value of ``panel``.
 
     Args:
@@ -312,7 +326,7 @@ def plot_rows(rows: list[dict], path: Path, *, x: str, y: str, series: Callable[
                 ax.axhline(line[0][y], ls="--", lw=1, color=colour, label=label)
             else:
                 ax.plot([r[x] for r in line], [r[y] for r in line], "o-", color=colour, label=label)
-        for level, label in (lines(value) if lines else []):
+        for level, label in lines(value) if lines else []:
             ax.axhline(level, color="k", lw=0.8, ls=":", label=label)
         ax.set_xscale("log", base=xbase)
         ax.set_yscale("log")

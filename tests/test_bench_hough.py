@@ -42,8 +42,10 @@ def test_bench_writes_every_implementation(tmp_path):
         assert np.isclose(float(r["frames_per_s"]) * float(r["run_s"]), float(r["frames"]))
         if r["implementation"].startswith("spikejax"):
             assert float(r["compile_s"]) > 0  # reported apart from the run time
-        assert (r["cores"], r["parallel"]) == ("1", "1 device" if r["implementation"].startswith("spikejax")
-                                                else "1 process")
+        assert (r["cores"], r["parallel"]) == (
+            "1",
+            "1 device" if r["implementation"].startswith("spikejax") else "1 process",
+        )
         assert float(r["x_peer"]) > 0
     sync_line = next(r for r in rows if r["mode"] == "sync" and r["shape"] == "line")
     assert int(sync_line["frames"]) == bench_hough.N_FRAMES
@@ -64,18 +66,43 @@ def test_modes_agree_on_sparse_slots_and_differ_on_dense_ones():
 
 def test_bench_splits_the_streams_over_two_cpu_devices(tmp_path):
     """``--cpu-devices 2``: each spikejax row from batch 2 on is run again over both devices."""
-    run = subprocess.run([sys.executable, "-m", "spikejax.cli", "bench", "hough", "--trials", "2", "--cpu-devices", "2",
-                          "--no-progress", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "spikejax.cli",
+            "bench",
+            "hough",
+            "--trials",
+            "2",
+            "--cpu-devices",
+            "2",
+            "--no-progress",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     assert "2 x cpu" in run.stdout
     with open(tmp_path / "hough.csv") as f:
         rows = list(csv.DictReader(f))
     split = [r for r in rows if r["implementation"].endswith(", 2 devices")]
     assert {(r["shape"], r["mode"], r["batch"]) for r in split} == {
-        ("line", "sync", "2"), ("circle", "sync", "2"), ("line", "async", "2")}
+        ("line", "sync", "2"),
+        ("circle", "sync", "2"),
+        ("line", "async", "2"),
+    }
     for r in split:
-        one = next(o for o in rows if o["implementation"] == r["implementation"].removesuffix(", 2 devices")
-                   and o["mode"] == r["mode"] and o["batch"] == r["batch"])
+        one = next(
+            o
+            for o in rows
+            if o["implementation"] == r["implementation"].removesuffix(", 2 devices")
+            and o["mode"] == r["mode"]
+            and o["batch"] == r["batch"]
+        )
         assert r["frames"] == one["frames"] and r["events"] == one["events"]
         assert (r["devices"], one["devices"]) == ("2", "1")
         assert (r["cores"], r["parallel"]) == ("2", "2 devices")

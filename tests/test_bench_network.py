@@ -12,9 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from robots.robobee import bench_network
-from robots.robobee import delta_network
-from robots.robobee import peers
+from robots.robobee import bench_network, delta_network, peers
 from robots.robobee import reference as numpy_reference
 
 SEED = 0
@@ -171,8 +169,9 @@ def test_nest_equals_numpy_reference():
 def test_main_network_writes_the_table(tmp_path):
     """All implementations in one table (Brian2 standalone compiles C++: about 20 s)."""
     pytest.importorskip("brian2")
-    assert bench_network.run(duration=0.01, seed=SEED, batches=[1, 2], repeats=1, out=str(tmp_path),
-                             no_progress=True) == 0
+    assert (
+        bench_network.run(duration=0.01, seed=SEED, batches=[1, 2], repeats=1, out=str(tmp_path), no_progress=True) == 0
+    )
     text = (tmp_path / "bench_robobee_network.csv").read_text().splitlines()
     header, lines = text[0].split(","), [line.split(",") for line in text[1:]]
     assert header[: len(delta_network.ROW_FIELDS)] == list(delta_network.ROW_FIELDS)

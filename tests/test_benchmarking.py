@@ -28,9 +28,13 @@ def test_interleaved_times_every_run_once_a_round_and_keeps_the_best():
 
 
 def test_ratios_are_taken_against_the_peer_on_the_same_cores():
-    rows = [dict(impl="peer", cores=1, rate=2.0), dict(impl="peer", cores=4, rate=6.0),
-            dict(impl="ours", cores=1, rate=4.0), dict(impl="ours", cores=4, rate=30.0), dict(impl="ours", cores=2,
-                                                                                              rate=1.0)]
+    rows = [
+        dict(impl="peer", cores=1, rate=2.0),
+        dict(impl="peer", cores=4, rate=6.0),
+        dict(impl="ours", cores=1, rate=4.0),
+        dict(impl="ours", cores=4, rate=30.0),
+        dict(impl="ours", cores=2, rate=1.0),
+    ]
     benchmarking.add_ratios(rows, "x_peer", "rate", lambda p, _: p["impl"] == "peer")
     assert [r["x_peer"] for r in rows[:4]] == [1.0, 1.0, 2.0, 5.0]
     assert math.isnan(rows[4]["x_peer"])

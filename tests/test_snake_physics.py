@@ -12,12 +12,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from robots.snake.gait import gait_params
-from robots.snake.gait import joint_targets
-from robots.snake.physics import forward_kinematics
-from robots.snake.physics import joint_qpos_index
-from robots.snake.physics import load_mj_model
-from robots.snake.physics import make_physics
+from robots.snake.gait import gait_params, joint_targets
+from robots.snake.physics import forward_kinematics, joint_qpos_index, load_mj_model, make_physics
 from spikejax.errors import UserError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,7 +95,7 @@ def _speed_and_turn(phys, steers, seconds=25.0):
     yaw = np.unwrap(np.arctan2(states.head_mat[..., 1, 0], states.head_mat[..., 0, 0]), axis=1)
     per = int(round(2.5 / 0.02))  # the gait's period in control steps
     speed = np.linalg.norm(com[:, -1, :2] - com[:, per - 1, :2], axis=1) / (seconds - 2.5)
-    periods = yaw[:, per:(n // per) * per].reshape(len(steers), -1, per).mean(axis=2)
+    periods = yaw[:, per : (n // per) * per].reshape(len(steers), -1, per).mean(axis=2)
     t = 2.5 * np.arange(periods.shape[1])
     turn = np.polyfit(t, periods.T, 1)[0]
     return speed, turn
@@ -149,8 +145,9 @@ def test_mjx_compiles_in_seconds_and_agrees_with_mujoco_c():
     of mass within 2 cm (of about 0.45 m travelled) and the distance it
     travels in the second gait period within 5 %.
     """
-    proc = subprocess.run([sys.executable, "-c", _MJX_SCRIPT, "250"], cwd=ROOT, capture_output=True, text=True,
-                          timeout=150)
+    proc = subprocess.run(
+        [sys.executable, "-c", _MJX_SCRIPT, "250"], cwd=ROOT, capture_output=True, text=True, timeout=150
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     head = {k: np.asarray(v["head"]) for k, v in out.items()}
@@ -163,13 +160,16 @@ def test_mjx_compiles_in_seconds_and_agrees_with_mujoco_c():
     assert travel["mujoco"] > 0.1  # the snake moved: agreement is not two resting snakes
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(backend="bullet"), "backend"),
-    (dict(settings="fast"), "settings"),
-    (dict(substeps=0), "substeps"),
-    (dict(dt=-0.001), "dt"),
-    (dict(nthread=0), "nthread"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(backend="bullet"), "backend"),
+        (dict(settings="fast"), "settings"),
+        (dict(substeps=0), "substeps"),
+        (dict(dt=-0.001), "dt"),
+        (dict(nthread=0), "nthread"),
+    ],
+)
 def test_bad_arguments_are_user_errors(kwargs, match):
     with pytest.raises(UserError, match=match):
         make_physics(**kwargs)

@@ -27,22 +27,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax.benchmarking import Processes
-from spikejax.benchmarking import add_ratios
-from spikejax.benchmarking import compile_ahead
-from spikejax.benchmarking import cores_label
-from spikejax.benchmarking import interleaved
-from spikejax.benchmarking import machine_banner
-from spikejax.benchmarking import write_csv
-from spikejax.commands import Command
-from spikejax.commands import count
-from spikejax.devices import cpu_devices_for_run
-from spikejax.devices import shard_batch
+from spikejax.benchmarking import (
+    Processes,
+    add_ratios,
+    compile_ahead,
+    cores_label,
+    interleaved,
+    machine_banner,
+    write_csv,
+)
+from spikejax.commands import Command, count
+from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
-from spikejax.sweep import load_sweep
-from spikejax.sweep import read_results
-from spikejax.sweep import run_sweep
-from spikejax.sweep import trial_key
+from spikejax.sweep import load_sweep, read_results, run_sweep, trial_key
 
 if TYPE_CHECKING:
     from robots.hexapod.trial import GaitTrialParams
@@ -94,9 +91,16 @@ class SpikejaxTrials:
     @property
     def info(self) -> dict:
         impl = f"spikejax jit+vmap, chunks of {self.size}" + (f", {self.devices} devices" if self.devices > 1 else "")
-        return dict(impl=impl, trials=self.n_trials, compile_s=self.compile_s, run_s=self.run_s,
-                    trials_per_s=self.n_trials / self.run_s, converged=self.converged, cores=self.devices,
-                    parallel=cores_label(self.devices, "device"))
+        return dict(
+            impl=impl,
+            trials=self.n_trials,
+            compile_s=self.compile_s,
+            run_s=self.run_s,
+            trials_per_s=self.n_trials / self.run_s,
+            converged=self.converged,
+            cores=self.devices,
+            parallel=cores_label(self.devices, "device"),
+        )
 
 
 def bench_spikejax(n_trials: int, chunk_size: int, params: GaitTrialParams, devices: int = 1) -> dict:
@@ -120,8 +124,7 @@ class NumpyTrials:
         self.run_s, self.converged = math.inf, None
 
     def __call__(self) -> float:
-        from robots.hexapod.reference import reference_gait_correct
-        from robots.hexapod.reference import reference_train
+        from robots.hexapod.reference import reference_gait_correct, reference_train
 
         p, converged = self.params, 0
         t0 = time.perf_counter()
@@ -135,9 +138,16 @@ class NumpyTrials:
 
     @property
     def info(self) -> dict:
-        return dict(impl="NumPy loops (Alg. 1 as written)", trials=self.n_trials, compile_s=0.0, run_s=self.run_s,
-                    trials_per_s=self.n_trials / self.run_s, converged=self.converged, cores=1,
-                    parallel="1 process")
+        return dict(
+            impl="NumPy loops (Alg. 1 as written)",
+            trials=self.n_trials,
+            compile_s=0.0,
+            run_s=self.run_s,
+            trials_per_s=self.n_trials / self.run_s,
+            converged=self.converged,
+            cores=1,
+            parallel="1 process",
+        )
 
 
 def bench_numpy(n_trials: int, params: GaitTrialParams) -> dict:
@@ -162,22 +172,39 @@ def bench_sweep(n_trials: int, chunk_size: int) -> dict:
         runs = json.loads((Path(tmp) / "out" / "metadata.json").read_text())["runs"]
     compile_s = float(runs[-1].get("compile_seconds", float("nan")))
     n_dev = jax.device_count()
-    return dict(impl=f"spikejax sweep engine, end to end, chunks of {chunk_size}", trials=n_trials,
-                compile_s=compile_s, run_s=total_s - compile_s, trials_per_s=n_trials / (total_s - compile_s),
-                converged=float(np.mean(table["converged"])), cores=n_dev, parallel=cores_label(n_dev, "device"))
+    return dict(
+        impl=f"spikejax sweep engine, end to end, chunks of {chunk_size}",
+        trials=n_trials,
+        compile_s=compile_s,
+        run_s=total_s - compile_s,
+        trials_per_s=n_trials / (total_s - compile_s),
+        converged=float(np.mean(table["converged"])),
+        cores=n_dev,
+        parallel=cores_label(n_dev, "device"),
+    )
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trials", type=count, default=None, help=f"trials to time (default {TARGET_TRIALS:,})")
     parser.add_argument("--out", default=None, help="write bench_gaits.csv here")
     parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 1)")
-    parser.add_argument("--cpu-devices", type=count, default=None,
-                        help="CPU devices JAX presents (default: one per core); also the NumPy pool's processes")
+    parser.add_argument(
+        "--cpu-devices",
+        type=count,
+        default=None,
+        help="CPU devices JAX presents (default: one per core); also the NumPy pool's processes",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def run(*, trials: int | None = None, out: str | None = None, repeats: int | None = None,
-        cpu_devices: int | None = None, no_progress: bool = False) -> int:
+def run(
+    *,
+    trials: int | None = None,
+    out: str | None = None,
+    repeats: int | None = None,
+    cpu_devices: int | None = None,
+    no_progress: bool = False,
+) -> int:
     """``spikejax bench gaits``: print the table; write ``bench_gaits.csv`` to ``out``.
 
     Args:
@@ -220,9 +247,14 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
         for key, timer in runs.items():
             if key[0] == "numpy":
                 infos = timer.info()
-                row = dict(infos[0], trials=n_numpy * key[1], run_s=best[key], cores=key[1],
-                           parallel=cores_label(key[1], "process"),
-                           converged=float(np.mean([i["converged"] for i in infos])))
+                row = dict(
+                    infos[0],
+                    trials=n_numpy * key[1],
+                    run_s=best[key],
+                    cores=key[1],
+                    parallel=cores_label(key[1], "process"),
+                    converged=float(np.mean([i["converged"] for i in infos])),
+                )
                 row["trials_per_s"] = row["trials"] / row["run_s"]
                 if key[1] > 1:
                     row["impl"] += f", {key[1]} processes"
@@ -240,19 +272,27 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
             print(f"  {r['impl']}: {r['trials_per_s']:.2f} trials/s ({r['trials']} trials, {r['parallel']})")
             continue
         verdict = "meets" if (n_trials >= TARGET_TRIALS and total < TARGET_SECONDS) else "n/a"
-        print(f"  {r['impl']}: compile {r['compile_s']:.1f} s, run {r['run_s']:.1f} s for {n_trials} trials "
-              f"= {r['trials_per_s']:.0f} trials/s; total {total:.1f} s "
-              f"(target {TARGET_TRIALS} in < {TARGET_SECONDS:.0f} s: {verdict}); converged {r['converged']:.1%}; "
-              f"{r['x_numpy']:.0f}x the NumPy loops on {r['cores']} core{'s' if r['cores'] > 1 else ''}")
+        print(
+            f"  {r['impl']}: compile {r['compile_s']:.1f} s, run {r['run_s']:.1f} s for {n_trials} trials "
+            f"= {r['trials_per_s']:.0f} trials/s; total {total:.1f} s "
+            f"(target {TARGET_TRIALS} in < {TARGET_SECONDS:.0f} s: {verdict}); converged {r['converged']:.1%}; "
+            f"{r['x_numpy']:.0f}x the NumPy loops on {r['cores']} core{'s' if r['cores'] > 1 else ''}"
+        )
     for c in cores:
         sel = [r for r in rows if r["cores"] == c and not r["impl"].startswith("NumPy")]
         if sel:
-            print(f"  speed-up over NumPy loops, {c} core{'s' if c > 1 else ''} against as many: "
-                  f"{max(r['x_numpy'] for r in sel):.0f}x")
+            print(
+                f"  speed-up over NumPy loops, {c} core{'s' if c > 1 else ''} against as many: "
+                f"{max(r['x_numpy'] for r in sel):.0f}x"
+            )
     if out:
         write_csv(Path(out) / "bench_gaits.csv", rows, COLUMNS)
     return 0
 
 
-command = Command(help="three-gait SCPG training trials per second, against plain NumPy loops",
-                  add_arguments=_add_arguments, run=run, description=__doc__.splitlines()[0])
+command = Command(
+    help="three-gait SCPG training trials per second, against plain NumPy loops",
+    add_arguments=_add_arguments,
+    run=run,
+    description=__doc__.splitlines()[0],
+)

@@ -47,30 +47,23 @@ import jax.numpy as jnp
 import numpy as np
 
 from robots.robobee import bench_network
-from robots.robobee.controller import ControllerConfig
-from robots.robobee.controller import controller_init
-from robots.robobee.controller import controller_params
-from robots.robobee.flight import flight_plan
-from robots.robobee.flight import fly
-from robots.robobee.lqr import altitude_params
-from robots.robobee.lqr import lateral_gain
-from robots.robobee.params import robobee_params
-from robots.robobee.params import randomize
-from robots.robobee.peers import RECORD_EVERY
-from robots.robobee.peers import Brian2FlightRun
-from spikejax.benchmarking import JaxRun
-from spikejax.benchmarking import Processes
-from spikejax.benchmarking import batch_sizes
-from spikejax.benchmarking import compile_ahead
-from spikejax.benchmarking import cores_label
-from spikejax.benchmarking import interleaved
-from spikejax.benchmarking import machine_banner
-from spikejax.benchmarking import write_csv
-from spikejax.commands import Command
-from spikejax.commands import count
-from spikejax.commands import positive_float
-from spikejax.devices import cpu_devices_for_run
-from spikejax.devices import shard_batch
+from robots.robobee.controller import ControllerConfig, controller_params
+from robots.robobee.flight import flight_plan, fly
+from robots.robobee.lqr import altitude_params, lateral_gain
+from robots.robobee.params import randomize, robobee_params
+from robots.robobee.peers import RECORD_EVERY, Brian2FlightRun
+from spikejax.benchmarking import (
+    JaxRun,
+    Processes,
+    batch_sizes,
+    compile_ahead,
+    cores_label,
+    interleaved,
+    machine_banner,
+    write_csv,
+)
+from spikejax.commands import Command, count, positive_float
+from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 
 __all__ = [
@@ -101,8 +94,19 @@ STEP_BUDGET = 256 * 25_000
 REACHED_M = 5e-3
 N_NEURONS = 350
 
-ROW_FIELDS = ("impl", "batch", "flight_s", "timed_s", "build_or_compile_s", "run_s", "flights_per_s",
-              "sim_s_per_wall_s", "neuron_updates_per_s", "reached_q1", "reached_q2")
+ROW_FIELDS = (
+    "impl",
+    "batch",
+    "flight_s",
+    "timed_s",
+    "build_or_compile_s",
+    "run_s",
+    "flights_per_s",
+    "sim_s_per_wall_s",
+    "neuron_updates_per_s",
+    "reached_q1",
+    "reached_q2",
+)
 COLUMNS = (*ROW_FIELDS, "devices", "cores", "parallel", "x_brian2", "x_brian2_all_cores")
 
 
@@ -173,8 +177,9 @@ def flight_setup(batch: int, seed: int, randomize_robots: bool = False) -> Fligh
     else:
         robots = jax.tree.map(lambda x: jnp.broadcast_to(x, (batch,)), robot)
     K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
-    return FlightSetup(ControllerConfig(), controller_params(), robots, K, altitude_params(), flight_plan("waypoints"),
-                       keys)
+    return FlightSetup(
+        ControllerConfig(), controller_params(), robots, K, altitude_params(), flight_plan("waypoints"), keys
+    )
 
 
 def _reached(t: np.ndarray, q: np.ndarray, plan, hold_steps: int, segment_steps: int) -> tuple[float, float]:
@@ -192,11 +197,19 @@ def _row(impl, batch, flight_s, timed_s, build_s, run_s, reached=(math.nan, math
     """A result row; throughputs are for whole ``flight_s`` flights, extrapolated from ``timed_s`` of each."""
     run_per_flight_batch = run_s * flight_s / timed_s
     steps = round(flight_s / DT)
-    row = dict(impl=impl, batch=batch, flight_s=flight_s, timed_s=timed_s, build_or_compile_s=build_s, run_s=run_s,
-               flights_per_s=batch / run_per_flight_batch,
-               sim_s_per_wall_s=batch * flight_s / run_per_flight_batch,
-               neuron_updates_per_s=N_NEURONS * steps * batch / run_per_flight_batch,
-               reached_q1=reached[0], reached_q2=reached[1])
+    row = dict(
+        impl=impl,
+        batch=batch,
+        flight_s=flight_s,
+        timed_s=timed_s,
+        build_or_compile_s=build_s,
+        run_s=run_s,
+        flights_per_s=batch / run_per_flight_batch,
+        sim_s_per_wall_s=batch * flight_s / run_per_flight_batch,
+        neuron_updates_per_s=N_NEURONS * steps * batch / run_per_flight_batch,
+        reached_q1=reached[0],
+        reached_q2=reached[1],
+    )
     row.update(extra)
     return row
 
@@ -204,16 +217,34 @@ def _row(impl, batch, flight_s, timed_s, build_s, run_s, reached=(math.nan, math
 # ----------------------------------------------------------------- spikejax
 
 
-def _spikejax_flights(batch: int, duration: float, seed: int, *, randomize_robots: bool = False,
-                      step_budget: int = STEP_BUDGET, devices: int = 1) -> tuple[JaxRun, dict]:
+def _spikejax_flights(
+    batch: int,
+    duration: float,
+    seed: int,
+    *,
+    randomize_robots: bool = False,
+    step_budget: int = STEP_BUDGET,
+    devices: int = 1,
+) -> tuple[JaxRun, dict]:
     """The compiled flights of `run_spikejax_flights` and what their row needs besides the run time."""
     setup = flight_setup(batch, seed, randomize_robots)
     timed = timed_duration(batch, duration, step_budget)
     hold_steps, segment_steps = flight_steps(timed)
 
     def one(robot, key):
-        return fly(setup.config, setup.cparams, robot, setup.K, setup.altitude, setup.plan, jnp.bool_(True),
-                   hold_steps=hold_steps, segment_steps=segment_steps, record_every=RECORD_EVERY, key=key)
+        return fly(
+            setup.config,
+            setup.cparams,
+            robot,
+            setup.K,
+            setup.altitude,
+            setup.plan,
+            jnp.bool_(True),
+            hold_steps=hold_steps,
+            segment_steps=segment_steps,
+            record_every=RECORD_EVERY,
+            key=key,
+        )
 
     if devices > jax.device_count():
         raise UserError(f"{devices} devices asked, JAX presents {jax.device_count()}")
@@ -222,8 +253,16 @@ def _spikejax_flights(batch: int, duration: float, seed: int, *, randomize_robot
     impl = "spikejax jit(vmap(fly))" + (" randomized robots" if randomize_robots else "")
     impl += f", {devices} devices" if devices > 1 else ""
     return JaxRun(compiled, setup.robots, setup.keys), dict(
-        impl=impl, batch=batch, duration=duration, timed=timed, compile_s=compile_s, plan=setup.plan,
-        hold_steps=hold_steps, segment_steps=segment_steps, devices=devices)
+        impl=impl,
+        batch=batch,
+        duration=duration,
+        timed=timed,
+        compile_s=compile_s,
+        plan=setup.plan,
+        hold_steps=hold_steps,
+        segment_steps=segment_steps,
+        devices=devices,
+    )
 
 
 def _flights_row(info: dict, run_s: float, rec) -> dict:
@@ -231,13 +270,31 @@ def _flights_row(info: dict, run_s: float, rec) -> dict:
     reached = (math.nan, math.nan)
     if math.isclose(info["timed"], info["duration"], abs_tol=DT / 2):
         reached = _reached(rec.t[0], rec.q, info["plan"], info["hold_steps"], info["segment_steps"])
-    return _row(info["impl"], info["batch"], info["duration"], info["timed"], info["compile_s"], run_s, reached,
-                recording=rec, devices=info["devices"], cores=info["devices"],
-                parallel=cores_label(info["devices"], "device"))
+    return _row(
+        info["impl"],
+        info["batch"],
+        info["duration"],
+        info["timed"],
+        info["compile_s"],
+        run_s,
+        reached,
+        recording=rec,
+        devices=info["devices"],
+        cores=info["devices"],
+        parallel=cores_label(info["devices"], "device"),
+    )
 
 
-def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, *, randomize_robots: bool = False,
-                         step_budget: int = STEP_BUDGET, repeats: int = 1, devices: int = 1) -> dict:
+def run_spikejax_flights(
+    batch: int,
+    duration: float = FLIGHT_S,
+    seed: int = 0,
+    *,
+    randomize_robots: bool = False,
+    step_budget: int = STEP_BUDGET,
+    repeats: int = 1,
+    devices: int = 1,
+) -> dict:
     """``batch`` closed-loop flights of ``duration`` seconds as one ``jax.jit(jax.vmap(fly))``.
 
     The program is compiled ahead (`spikejax.benchmarking.compile_ahead`,
@@ -266,8 +323,9 @@ def run_spikejax_flights(batch: int, duration: float = FLIGHT_S, seed: int = 0, 
         when the flights were shortened), ``recording`` the flights'
         `robots.robobee.flight.Recording` (NumPy).
     """
-    timer, info = _spikejax_flights(batch, duration, seed, randomize_robots=randomize_robots,
-                                    step_budget=step_budget, devices=devices)
+    timer, info = _spikejax_flights(
+        batch, duration, seed, randomize_robots=randomize_robots, step_budget=step_budget, devices=devices
+    )
     run_s = min(timer() for _ in range(repeats))
     return _flights_row(info, run_s, timer.result)
 
@@ -282,8 +340,15 @@ def _brian2_args(duration: float, seed: int, target: str, flight_s: float, scale
     return key, hold_steps, segment_steps, round(duration / DT), target
 
 
-def _brian2_row(info: dict, duration: float, flight_s: float, scale_plan: bool = True, processes: int = 1,
-                build_s: float | None = None, run_s: float | None = None) -> dict:
+def _brian2_row(
+    info: dict,
+    duration: float,
+    flight_s: float,
+    scale_plan: bool = True,
+    processes: int = 1,
+    build_s: float | None = None,
+    run_s: float | None = None,
+) -> dict:
     """The row of a Brian2 flight (`robots.robobee.peers.Brian2FlightRun.info`), or of ``processes`` side by side."""
     hold_steps, segment_steps = flight_steps(duration if scale_plan else flight_s)
     n_steps = round(duration / DT)
@@ -293,19 +358,47 @@ def _brian2_row(info: dict, duration: float, flight_s: float, scale_plan: bool =
         if hold_steps + (w + 1) * segment_steps > n_steps:
             reached.append(math.nan)
         else:
-            reached.append(_reached(rec["t"], rec["q"][None], flight_plan("waypoints"), hold_steps,
-                                    segment_steps)[w])
+            reached.append(_reached(rec["t"], rec["q"][None], flight_plan("waypoints"), hold_steps, segment_steps)[w])
     impl = info["impl"] + (f", {processes} processes at once" if processes > 1 else "")
-    extra = dict(recording=rec, counts=info["counts"], w_ih=info["w_ih"], w_ho=info["w_ho"], op_s=info["op_s"],
-                 prepare_s=info["prepare_s"]) if processes == 1 else {}
-    return _row(impl, processes, flight_s, n_steps * DT, info["build_s"] if build_s is None else build_s,
-                info["run_s"] if run_s is None else run_s, reached, cores=processes,
-                parallel=cores_label(processes, "process"), devices=1, **extra)
+    extra = (
+        dict(
+            recording=rec,
+            counts=info["counts"],
+            w_ih=info["w_ih"],
+            w_ho=info["w_ho"],
+            op_s=info["op_s"],
+            prepare_s=info["prepare_s"],
+        )
+        if processes == 1
+        else {}
+    )
+    return _row(
+        impl,
+        processes,
+        flight_s,
+        n_steps * DT,
+        info["build_s"] if build_s is None else build_s,
+        info["run_s"] if run_s is None else run_s,
+        reached,
+        cores=processes,
+        parallel=cores_label(processes, "process"),
+        devices=1,
+        **extra,
+    )
 
 
-def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
-                           flight_s: float = FLIGHT_S, scale_plan: bool = True, learn: bool = True,
-                           use_snn: bool = True, warmup_steps: int = RECORD_EVERY, repeats: int = 1) -> dict:
+def run_brian2_closed_loop(
+    duration: float = FLIGHT_S,
+    seed: int = 0,
+    target: str = "cython",
+    *,
+    flight_s: float = FLIGHT_S,
+    scale_plan: bool = True,
+    learn: bool = True,
+    use_snn: bool = True,
+    warmup_steps: int = RECORD_EVERY,
+    repeats: int = 1,
+) -> dict:
     """One closed-loop flight in Brian2's runtime mode (`robots.robobee.peers.Brian2FlightRun`), timed on ``duration``.
 
     The network is spikejax's flight 0 of the same ``seed``. A first run of
@@ -343,8 +436,12 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
 
     old_target = b2.prefs.codegen.target
     try:
-        run = Brian2FlightRun(*_brian2_args(duration, seed, target, flight_s, scale_plan), learn=learn,
-                              use_snn=use_snn, warmup_steps=warmup_steps)
+        run = Brian2FlightRun(
+            *_brian2_args(duration, seed, target, flight_s, scale_plan),
+            learn=learn,
+            use_snn=use_snn,
+            warmup_steps=warmup_steps,
+        )
         for _ in range(repeats):
             run()
         info = run.info
@@ -353,8 +450,15 @@ def run_brian2_closed_loop(duration: float = FLIGHT_S, seed: int = 0, target: st
     return _brian2_row(info, duration, flight_s, scale_plan)
 
 
-def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: int = 0, target: str = "cython", *,
-                            flight_s: float = FLIGHT_S, repeats: int = 1) -> dict:
+def run_brian2_on_all_cores(
+    processes: int,
+    duration: float = FLIGHT_S,
+    seed: int = 0,
+    target: str = "cython",
+    *,
+    flight_s: float = FLIGHT_S,
+    repeats: int = 1,
+) -> dict:
     """``processes`` Brian2 flights at once, one process each: what a Brian2 user gets from that many cores.
 
     Brian2's runtime mode runs one flight on one core; a user with several
@@ -370,36 +474,61 @@ def run_brian2_on_all_cores(processes: int, duration: float = FLIGHT_S, seed: in
     with Processes(Brian2FlightRun, *_brian2_args(duration, seed, target, flight_s), processes=processes) as run:
         run_s = min(run() for _ in range(repeats))
         infos = run.info()
-    return _brian2_row(infos[0], duration, flight_s, processes=processes,
-                       build_s=max(i["build_s"] for i in infos), run_s=run_s)
+    return _brian2_row(
+        infos[0], duration, flight_s, processes=processes, build_s=max(i["build_s"] for i in infos), run_s=run_s
+    )
 
 
 # ----------------------------------------------------------------- CLI
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--trials", type=count, default=None,
-                        help="the largest batch of flights (default: every batch of 1 .. 4096)")
+    parser.add_argument(
+        "--trials", type=count, default=None, help="the largest batch of flights (default: every batch of 1 .. 4096)"
+    )
     parser.add_argument("--out", default=None, help="write bench_robobee.csv (and bench_robobee_network.csv) here")
-    parser.add_argument("--duration", type=positive_float, default=None,
-                        help=f"simulated seconds of a flight (default {FLIGHT_S})")
+    parser.add_argument(
+        "--duration", type=positive_float, default=None, help=f"simulated seconds of a flight (default {FLIGHT_S})"
+    )
     parser.add_argument("--seed", type=int, default=None, help="network seed (default 0)")
-    parser.add_argument("--repeats", type=count, default=None,
-                        help="timed rounds, Brian2's and spikejax's, the best kept (default 3)")
+    parser.add_argument(
+        "--repeats", type=count, default=None, help="timed rounds, Brian2's and spikejax's, the best kept (default 3)"
+    )
     parser.add_argument("--randomize", action="store_true", help="also fly randomized robots at the largest batch")
-    parser.add_argument("--brian2-target", choices=("cython", "numpy"), default=None,
-                        help="Brian2's code generation target (default cython)")
-    parser.add_argument("--network", action=argparse.BooleanOptionalAction, default=True,
-                        help="then run the network-alone table (default: yes)")
-    parser.add_argument("--cpu-devices", type=count, default=None,
-                        help="CPU devices JAX presents (default: one per core); also Brian2's processes")
+    parser.add_argument(
+        "--brian2-target",
+        choices=("cython", "numpy"),
+        default=None,
+        help="Brian2's code generation target (default cython)",
+    )
+    parser.add_argument(
+        "--network",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="then run the network-alone table (default: yes)",
+    )
+    parser.add_argument(
+        "--cpu-devices",
+        type=count,
+        default=None,
+        help="CPU devices JAX presents (default: one per core); also Brian2's processes",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def run(*, trials: int | None = None, out: str | None = None, duration: float | None = None,
-        seed: int | None = None, repeats: int | None = None, randomize: bool = False,
-        brian2_target: str | None = None, network: bool = True, cpu_devices: int | None = None,
-        no_progress: bool = False) -> int:
+def run(
+    *,
+    trials: int | None = None,
+    out: str | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+    repeats: int | None = None,
+    randomize: bool = False,
+    brian2_target: str | None = None,
+    network: bool = True,
+    cpu_devices: int | None = None,
+    no_progress: bool = False,
+) -> int:
     """``spikejax bench robobee``: the closed-loop table, then the network-alone table.
 
     Args:
@@ -432,9 +561,11 @@ def run(*, trials: int | None = None, out: str | None = None, duration: float | 
     batches = batch_sizes(trials, BATCHES)
     print(machine_banner(n_dev))
     hold, segment = flight_steps(duration)
-    print(f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "
-          f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
-          f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}")
+    print(
+        f"RoboBee closed loop: 200-100-50 LIF SNN + Hebbian rule (both layers) + Eq. (8) decoder + LQR teacher + "
+        f"physics, dt = {DT * 1e3:g} ms; flight q0 -> q1 -> q2 of {duration:g} s "
+        f"(hold {hold * DT:g} s, 2 x {segment * DT:g} s), seed {seed}"
+    )
     from tqdm import tqdm
 
     with contextlib.ExitStack() as stack:
@@ -442,8 +573,10 @@ def run(*, trials: int | None = None, out: str | None = None, duration: float | 
         for processes in [1] + ([n_dev] if n_dev > 1 else []):
             try:
                 runs["brian2", processes] = stack.enter_context(
-                    Processes(Brian2FlightRun, *_brian2_args(duration, seed, brian2_target, duration),
-                              processes=processes))
+                    Processes(
+                        Brian2FlightRun, *_brian2_args(duration, seed, brian2_target, duration), processes=processes
+                    )
+                )
             except ImportError as err:
                 print(f"  skipped: {err}")
                 break
@@ -461,15 +594,29 @@ def run(*, trials: int | None = None, out: str | None = None, duration: float | 
         for key, runner in runs.items():
             if key[0] == "brian2":
                 got = runner.info()
-                rows.append(_brian2_row(got[0], duration, duration, processes=key[1],
-                                        build_s=max(i["build_s"] for i in got), run_s=best[key]))
+                rows.append(
+                    _brian2_row(
+                        got[0],
+                        duration,
+                        duration,
+                        processes=key[1],
+                        build_s=max(i["build_s"] for i in got),
+                        run_s=best[key],
+                    )
+                )
             else:
                 rows.append(_flights_row(infos[key[1]], best[key], runner.result))
     for r in rows:
-        extra = (f", of which network_operation {r['op_s']:.2f} s (first run) and Network.run's preparation about "
-                 f"{r['prepare_s']:.2f} s" if "op_s" in r else "")
-        print(f"  {r['impl']}, batch {r['batch']}: {r['flights_per_s']:.3g} flights/s (timed {r['timed_s']:g} s "
-              f"per flight, run {r['run_s']:.2f} s{extra})")
+        extra = (
+            f", of which network_operation {r['op_s']:.2f} s (first run) and Network.run's preparation about "
+            f"{r['prepare_s']:.2f} s"
+            if "op_s" in r
+            else ""
+        )
+        print(
+            f"  {r['impl']}, batch {r['batch']}: {r['flights_per_s']:.3g} flights/s (timed {r['timed_s']:g} s "
+            f"per flight, run {r['run_s']:.2f} s{extra})"
+        )
     brian2 = [r for r in rows if r["impl"].startswith("Brian2")]
     one = brian2[0]["flights_per_s"] if brian2 else math.nan
     every = brian2[-1]["flights_per_s"] if brian2 else math.nan
@@ -477,20 +624,26 @@ def run(*, trials: int | None = None, out: str | None = None, duration: float | 
         r["x_brian2"] = r["flights_per_s"] / one
         r["x_brian2_all_cores"] = r["flights_per_s"] / every
     print()
-    print("| implementation | batch | cores | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
-          f"simulated s / s | neuron updates/s | x Brian2 | x Brian2 on {n_dev} cores | reached q1, q2 |")
+    print(
+        "| implementation | batch | cores | compile/build (s) | timed (s simulated) | run (s) | flights/s | "
+        f"simulated s / s | neuron updates/s | x Brian2 | x Brian2 on {n_dev} cores | reached q1, q2 |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         reached = "-" if math.isnan(r["reached_q1"]) else f"{r['reached_q1']:.0%}, {r['reached_q2']:.0%}"
-        print(f"| {r['impl']} | {r['batch']} | {r['cores']} ({r['parallel']}) | {r['build_or_compile_s']:.2f} | "
-              f"{r['timed_s'] * r['batch']:g} | {r['run_s']:.2f} | {r['flights_per_s']:.4g} | "
-              f"{r['sim_s_per_wall_s']:.3g} | {r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | "
-              f"{r['x_brian2_all_cores']:.1f} | {reached} |")
-    print(f"(flights of {duration:g} s; timed: simulated seconds actually run (flights x timed length), the "
-          f"throughputs extrapolated from them; run: the best of {repeats} interleaved rounds; reached: within "
-          f"{REACHED_M * 1e3:g} mm of each waypoint at the end of its leg; Brian2 flies one flight on one core, or "
-          f"{n_dev} side by side in {n_dev} processes; a row on 1 core compares with x Brian2, a row on {n_dev} "
-          f"with x Brian2 on {n_dev} cores)")
+        print(
+            f"| {r['impl']} | {r['batch']} | {r['cores']} ({r['parallel']}) | {r['build_or_compile_s']:.2f} | "
+            f"{r['timed_s'] * r['batch']:g} | {r['run_s']:.2f} | {r['flights_per_s']:.4g} | "
+            f"{r['sim_s_per_wall_s']:.3g} | {r['neuron_updates_per_s'] / 1e6:,.2f} M | {r['x_brian2']:.1f} | "
+            f"{r['x_brian2_all_cores']:.1f} | {reached} |"
+        )
+    print(
+        f"(flights of {duration:g} s; timed: simulated seconds actually run (flights x timed length), the "
+        f"throughputs extrapolated from them; run: the best of {repeats} interleaved rounds; reached: within "
+        f"{REACHED_M * 1e3:g} mm of each waypoint at the end of its leg; Brian2 flies one flight on one core, or "
+        f"{n_dev} side by side in {n_dev} processes; a row on 1 core compares with x Brian2, a row on {n_dev} "
+        f"with x Brian2 on {n_dev} cores)"
+    )
     if out:
         write_csv(Path(out) / "bench_robobee.csv", rows, COLUMNS)
     if network:
@@ -499,5 +652,9 @@ def run(*, trials: int | None = None, out: str | None = None, duration: float | 
     return 0
 
 
-command = Command(help="closed-loop RoboBee flights per second, spikejax against Brian2",
-                  add_arguments=_add_arguments, run=run, description=__doc__.splitlines()[0])
+command = Command(
+    help="closed-loop RoboBee flights per second, spikejax against Brian2",
+    add_arguments=_add_arguments,
+    run=run,
+    description=__doc__.splitlines()[0],
+)

@@ -39,36 +39,35 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from robots.robobee.delta_network import DT
-from robots.robobee.delta_network import N_HIDDEN
-from robots.robobee.delta_network import N_INPUT
-from robots.robobee.delta_network import N_OUTPUT
-from robots.robobee.delta_network import P_CONNECT
-from robots.robobee.delta_network import ROW_FIELDS
-from robots.robobee.delta_network import delta_network_params
-from robots.robobee.delta_network import input_currents
-from robots.robobee.delta_network import make_network
-from robots.robobee.delta_network import n_steps_of
-from robots.robobee.delta_network import rates_hz
-from robots.robobee.delta_network import result_row
-from robots.robobee.delta_network import simulate
-from robots.robobee.peers import Brian2RuntimeNetwork
-from robots.robobee.peers import Brian2StandaloneNetwork
-from robots.robobee.peers import NestNetwork
+from robots.robobee.delta_network import (
+    DT,
+    N_HIDDEN,
+    N_INPUT,
+    N_OUTPUT,
+    P_CONNECT,
+    ROW_FIELDS,
+    delta_network_params,
+    input_currents,
+    make_network,
+    n_steps_of,
+    rates_hz,
+    result_row,
+    simulate,
+)
+from robots.robobee.peers import Brian2RuntimeNetwork, Brian2StandaloneNetwork, NestNetwork
 from robots.robobee.reference import NumpyNetworkRun
-from spikejax.benchmarking import JaxRun
-from spikejax.benchmarking import Processes
-from spikejax.benchmarking import add_ratios
-from spikejax.benchmarking import compile_ahead
-from spikejax.benchmarking import cores_label
-from spikejax.benchmarking import interleaved
-from spikejax.benchmarking import machine_banner
-from spikejax.benchmarking import write_csv
-from spikejax.commands import Command
-from spikejax.commands import count
-from spikejax.commands import positive_float
-from spikejax.devices import cpu_devices_for_run
-from spikejax.devices import shard_batch
+from spikejax.benchmarking import (
+    JaxRun,
+    Processes,
+    add_ratios,
+    compile_ahead,
+    cores_label,
+    interleaved,
+    machine_banner,
+    write_csv,
+)
+from spikejax.commands import Command, count, positive_float
+from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 
 __all__ = ["BATCHES", "COLUMNS", "command", "run", "run_spikejax"]
@@ -77,8 +76,17 @@ BATCHES = (1, 16, 256, 1024)
 COLUMNS = (*ROW_FIELDS, "cores", "parallel", "x_nest", "x_brian2_standalone")
 
 
-def _spikejax(n_networks: int, duration: float, seed: int, *, step: str = "layers", synapses: str = "dense",
-              weight_dtype=jnp.bfloat16, unroll: int = 1, devices: int = 1) -> tuple[JaxRun, dict]:
+def _spikejax(
+    n_networks: int,
+    duration: float,
+    seed: int,
+    *,
+    step: str = "layers",
+    synapses: str = "dense",
+    weight_dtype=jnp.bfloat16,
+    unroll: int = 1,
+    devices: int = 1,
+) -> tuple[JaxRun, dict]:
     """The compiled run of `run_spikejax` and its row so far (``impl``, ``batch``, compile time, cores)."""
     n_steps = n_steps_of(duration)
     params = delta_network_params(make_network(seed), synapses, weight_dtype)
@@ -93,12 +101,28 @@ def _spikejax(n_networks: int, duration: float, seed: int, *, step: str = "layer
         timer = JaxRun(compiled, currents)
     impl = f"spikejax {step} {synapses} {jnp.dtype(weight_dtype).name}" + (f" unroll {unroll}" if unroll != 1 else "")
     impl += f", {devices} devices" if devices > 1 else ""
-    return timer, dict(impl=impl, batch=n_networks, steps=n_steps, build_s=compile_s, cores=devices,
-                       parallel=cores_label(devices, "device"))
+    return timer, dict(
+        impl=impl,
+        batch=n_networks,
+        steps=n_steps,
+        build_s=compile_s,
+        cores=devices,
+        parallel=cores_label(devices, "device"),
+    )
 
 
-def run_spikejax(n_networks: int, duration: float, seed: int, *, step: str = "layers", synapses: str = "dense",
-                 weight_dtype=jnp.bfloat16, unroll: int = 1, repeats: int = 1, devices: int = 1) -> dict:
+def run_spikejax(
+    n_networks: int,
+    duration: float,
+    seed: int,
+    *,
+    step: str = "layers",
+    synapses: str = "dense",
+    weight_dtype=jnp.bfloat16,
+    unroll: int = 1,
+    repeats: int = 1,
+    devices: int = 1,
+) -> dict:
     """``n_networks`` networks (same connectivity, own input currents) as one ``jit(vmap(scan))``.
 
     The program is compiled ahead (`spikejax.benchmarking.compile_ahead`,
@@ -119,8 +143,16 @@ def run_spikejax(n_networks: int, duration: float, seed: int, *, step: str = "la
     Returns:
         A result row (`ROW_FIELDS`, ``cores``, ``parallel``); ``counts`` holds the spikes per network and neuron.
     """
-    timer, row = _spikejax(n_networks, duration, seed, step=step, synapses=synapses, weight_dtype=weight_dtype,
-                           unroll=unroll, devices=devices)
+    timer, row = _spikejax(
+        n_networks,
+        duration,
+        seed,
+        step=step,
+        synapses=synapses,
+        weight_dtype=weight_dtype,
+        unroll=unroll,
+        devices=devices,
+    )
     run_s = min(timer() for _ in range(repeats))
     return _row(row, run_s, np.asarray(timer.result))
 
@@ -134,18 +166,34 @@ def _row(row: dict, run_s: float, counts) -> dict:
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=positive_float, default=None, help="simulated seconds (default 1)")
     parser.add_argument("--seed", type=int, default=None, help="network and input seed (default 0)")
-    parser.add_argument("--batches", type=count, nargs="+", default=None,
-                        help=f"spikejax batch sizes (default {' '.join(map(str, BATCHES))})")
+    parser.add_argument(
+        "--batches",
+        type=count,
+        nargs="+",
+        default=None,
+        help=f"spikejax batch sizes (default {' '.join(map(str, BATCHES))})",
+    )
     parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 3)")
     parser.add_argument("--out", default=None, help="write bench_robobee_network.csv here")
-    parser.add_argument("--cpu-devices", type=count, default=None,
-                        help="CPU devices JAX presents (default: one per core); also the peers' processes and threads")
+    parser.add_argument(
+        "--cpu-devices",
+        type=count,
+        default=None,
+        help="CPU devices JAX presents (default: one per core); also the peers' processes and threads",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def run(*, duration: float | None = None, seed: int | None = None, batches: list[int] | None = None,
-        repeats: int | None = None, out: str | None = None, cpu_devices: int | None = None,
-        no_progress: bool = False) -> int:
+def run(
+    *,
+    duration: float | None = None,
+    seed: int | None = None,
+    batches: list[int] | None = None,
+    repeats: int | None = None,
+    out: str | None = None,
+    cpu_devices: int | None = None,
+    no_progress: bool = False,
+) -> int:
     """``spikejax bench robobee-network``: print the network-alone table, write ``bench_robobee_network.csv``.
 
     Args:
@@ -167,13 +215,19 @@ def run(*, duration: float | None = None, seed: int | None = None, batches: list
         raise UserError(f"--batches and --repeats must be >= 1, got {list(batches)} and {repeats}")
     n_dev = cpu_devices_for_run(cpu_devices)
     print(machine_banner(n_dev))
-    print(f"RoboBee network alone: {N_INPUT}-{N_HIDDEN}-{N_OUTPUT} LIF, {P_CONNECT:.0%} connectivity, "
-          f"dt = {DT * 1e3:g} ms, {duration:g} s = {n_steps_of(duration)} steps, seed {seed}")
+    print(
+        f"RoboBee network alone: {N_INPUT}-{N_HIDDEN}-{N_OUTPUT} LIF, {P_CONNECT:.0%} connectivity, "
+        f"dt = {DT * 1e3:g} ms, {duration:g} s = {n_steps_of(duration)} steps, seed {seed}"
+    )
     from tqdm import tqdm
 
     n_steps = n_steps_of(duration)
-    peers = [(NumpyNetworkRun, {}, 1, 1), (Brian2RuntimeNetwork, {}, 1, 1), (Brian2StandaloneNetwork, {}, 1, 1),
-             (NestNetwork, dict(threads=1), 1, 1)]
+    peers = [
+        (NumpyNetworkRun, {}, 1, 1),
+        (Brian2RuntimeNetwork, {}, 1, 1),
+        (Brian2StandaloneNetwork, {}, 1, 1),
+        (NestNetwork, dict(threads=1), 1, 1),
+    ]
     if n_dev > 1:
         peers += [(Brian2StandaloneNetwork, {}, n_dev, n_dev), (NestNetwork, dict(threads=n_dev), 1, n_dev)]
     with contextlib.ExitStack() as stack:
@@ -186,17 +240,26 @@ def run(*, duration: float | None = None, seed: int | None = None, batches: list
                 continue
             key = (factory.__name__, processes, cores)
             runs[key] = runner
-            rows[key] = dict(processes=processes, cores=cores,
-                             parallel=cores_label(processes, "process") if processes > 1
-                             else cores_label(kw.get("threads", 1), "thread") if "threads" in kw
-                             else "1 process")
+            rows[key] = dict(
+                processes=processes,
+                cores=cores,
+                parallel=cores_label(processes, "process")
+                if processes > 1
+                else cores_label(kw.get("threads", 1), "thread")
+                if "threads" in kw
+                else "1 process",
+            )
         big = max(batches)
-        jobs = [dict(n_networks=b, devices=d) for b in batches for d in [1] + ([n_dev] if n_dev > 1 and b >= n_dev
-                                                                               else [])]
+        jobs = [
+            dict(n_networks=b, devices=d) for b in batches for d in [1] + ([n_dev] if n_dev > 1 and b >= n_dev else [])
+        ]
         # The formulations that lost, at the largest batch (the gather at 16: it is slow).
-        jobs += [dict(n_networks=big, weight_dtype=jnp.float32), dict(n_networks=big, step="fused"),
-                 dict(n_networks=big, unroll=4),
-                 dict(n_networks=min(big, 16), synapses="fanin", weight_dtype=jnp.float32)]
+        jobs += [
+            dict(n_networks=big, weight_dtype=jnp.float32),
+            dict(n_networks=big, step="fused"),
+            dict(n_networks=big, unroll=4),
+            dict(n_networks=min(big, 16), synapses="fanin", weight_dtype=jnp.float32),
+        ]
         for job in tqdm(jobs, desc="robobee network: compiling", disable=no_progress):
             timer, row = _spikejax(duration=duration, seed=seed, **job)
             runs[row["impl"], row["batch"]] = timer
@@ -221,32 +284,47 @@ def run(*, duration: float | None = None, seed: int | None = None, batches: list
             table.append(r)
     for r in table:
         rates = ", ".join(f"{k} {v:.1f}" for k, v in rates_hz(r).items())
-        print(f"  {r['impl']}, batch {r['batch']}: {r['neuron_updates_per_s'] / 1e6:,.1f} M neuron updates/s;"
-              f" rates (Hz): {rates}")
+        print(
+            f"  {r['impl']}, batch {r['batch']}: {r['neuron_updates_per_s'] / 1e6:,.1f} M neuron updates/s;"
+            f" rates (Hz): {rates}"
+        )
     add_ratios(table, "x_nest", "neuron_updates_per_s", lambda p, _: p["impl"].startswith("NEST"))
-    add_ratios(table, "x_brian2_standalone", "neuron_updates_per_s",
-               lambda p, _: p["impl"].startswith("Brian2 C++ standalone"))
+    add_ratios(
+        table, "x_brian2_standalone", "neuron_updates_per_s", lambda p, _: p["impl"].startswith("Brian2 C++ standalone")
+    )
     print()
-    print("| implementation | batch | cores | compile/build (s) | run (s) | neuron updates/s | x NEST | "
-          "x Brian2 standalone |")
+    print(
+        "| implementation | batch | cores | compile/build (s) | run (s) | neuron updates/s | x NEST | "
+        "x Brian2 standalone |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for r in table:
-        print(f"| {r['impl']} | {r['batch']} | {r['cores']} ({r['parallel']}) | {r['build_or_compile_s']:.2f} | "
-              f"{r['run_s']:.3f} | {r['neuron_updates_per_s'] / 1e6:,.1f} M | {r['x_nest']:.2f} | "
-              f"{r['x_brian2_standalone']:.2f} |")
-    print(f"(run: the best of {repeats} interleaved rounds; x NEST, x Brian2 standalone: against the row of each "
-          "given the same cores; Brian2 standalone's run is the simulation loop as the binary times it)")
+        print(
+            f"| {r['impl']} | {r['batch']} | {r['cores']} ({r['parallel']}) | {r['build_or_compile_s']:.2f} | "
+            f"{r['run_s']:.3f} | {r['neuron_updates_per_s'] / 1e6:,.1f} M | {r['x_nest']:.2f} | "
+            f"{r['x_brian2_standalone']:.2f} |"
+        )
+    print(
+        f"(run: the best of {repeats} interleaved rounds; x NEST, x Brian2 standalone: against the row of each "
+        "given the same cores; Brian2 standalone's run is the simulation loop as the binary times it)"
+    )
     for cores in sorted({1, n_dev}):
         sel = [r for r in table if r["cores"] == cores and r["impl"].startswith("spikejax")]
         if sel and not all(math.isnan(r["x_nest"]) for r in sel):
             top = max(sel, key=lambda r: r["neuron_updates_per_s"])
-            print(f"  {cores} core{'s' if cores > 1 else ''}: spikejax at batch {top['batch']} = "
-                  f"{top['x_nest']:.2f} x NEST, {top['x_brian2_standalone']:.2f} x Brian2 standalone")
+            print(
+                f"  {cores} core{'s' if cores > 1 else ''}: spikejax at batch {top['batch']} = "
+                f"{top['x_nest']:.2f} x NEST, {top['x_brian2_standalone']:.2f} x Brian2 standalone"
+            )
     if out:
         path = write_csv(f"{out}/bench_robobee_network.csv", table, COLUMNS)
         print(f"wrote {path}")
     return 0
 
 
-command = Command(help="the RoboBee network alone: spikejax against NumPy, Brian2 and NEST",
-                  add_arguments=_add_arguments, run=run, description=__doc__.splitlines()[0])
+command = Command(
+    help="the RoboBee network alone: spikejax against NumPy, Brian2 and NEST",
+    add_arguments=_add_arguments,
+    run=run,
+    description=__doc__.splitlines()[0],
+)

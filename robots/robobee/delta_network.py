@@ -76,11 +76,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax.neurons import LIFParams
-from spikejax.neurons import LIFState
-from spikejax.neurons import lif_init
-from spikejax.neurons import lif_params
-from spikejax.neurons import lif_step
+from spikejax.neurons import LIFParams, LIFState, lif_init, lif_params, lif_step
 
 __all__ = [
     "DT",
@@ -122,8 +118,18 @@ W_SCALES = (0.04, 0.10)
 INPUT_RANGE = (1.5, 2.0)
 
 # The fields of a result row (`result_row`), the same for every implementation.
-ROW_FIELDS = ("impl", "batch", "neurons", "steps", "build_or_compile_s", "run_s", "neuron_updates_per_s",
-              "spikes_input", "spikes_hidden", "spikes_output")
+ROW_FIELDS = (
+    "impl",
+    "batch",
+    "neurons",
+    "steps",
+    "build_or_compile_s",
+    "run_s",
+    "neuron_updates_per_s",
+    "spikes_input",
+    "spikes_hidden",
+    "spikes_output",
+)
 
 
 class NetworkSpec(NamedTuple):
@@ -198,8 +204,15 @@ def result_row(impl: str, batch: int, steps: int, build_s: float, run_s: float, 
     ``counts`` (spikes per neuron, ``(..., 350)``) is kept in the row; ``extra`` fields are added.
     """
     counts = np.asarray(counts)
-    row = dict(impl=impl, batch=batch, neurons=N_NEURONS, steps=steps, build_or_compile_s=build_s, run_s=run_s,
-               neuron_updates_per_s=N_NEURONS * steps * batch / run_s)
+    row = dict(
+        impl=impl,
+        batch=batch,
+        neurons=N_NEURONS,
+        steps=steps,
+        build_or_compile_s=build_s,
+        run_s=run_s,
+        neuron_updates_per_s=N_NEURONS * steps * batch / run_s,
+    )
     row.update({f"spikes_{name}": int(counts[..., sl].sum()) for name, sl in zip(LAYERS, LAYER_SLICES)})
     row.update(counts=counts, **extra)
     return row
@@ -210,7 +223,6 @@ def rates_hz(row: dict) -> dict:
     duration = row["steps"] * DT
     sizes = dict(input=N_INPUT, hidden=N_HIDDEN, output=N_OUTPUT)
     return {name: row[f"spikes_{name}"] / (sizes[name] * row["batch"] * duration) for name in LAYERS}
-
 
 
 class DeltaNetworkParams(NamedTuple):
@@ -260,9 +272,7 @@ def delta_network_params(spec: NetworkSpec, synapses: str = "dense", weight_dtyp
         weight_dtype: dtype of the weights, ``bfloat16`` (exact: `make_network`
             rounds them so) or ``float32``; the jumps are summed in float32 either way.
     """
-    layers = tuple(
-        lif_params(tau=tau, v_th=spec.v_th[sl], t_ref=T_REF, dt=DT) for tau, sl in zip(TAUS, LAYER_SLICES)
-    )
+    layers = tuple(lif_params(tau=tau, v_th=spec.v_th[sl], t_ref=T_REF, dt=DT) for tau, sl in zip(TAUS, LAYER_SLICES))
     if synapses == "dense":
         w_ih, w_ho = spec.w_ih, spec.w_ho
         idx_ih = idx_ho = np.zeros((0,), np.int32)
@@ -270,8 +280,13 @@ def delta_network_params(spec: NetworkSpec, synapses: str = "dense", weight_dtyp
         (idx_ih, w_ih), (idx_ho, w_ho) = _fanin(spec.conn_ih, spec.w_ih), _fanin(spec.conn_ho, spec.w_ho)
     else:
         raise ValueError(f"synapses must be 'dense' or 'fanin', not {synapses!r}")
-    return DeltaNetworkParams(layers, jnp.asarray(w_ih, weight_dtype), jnp.asarray(w_ho, weight_dtype),
-                     jnp.asarray(idx_ih, jnp.int32), jnp.asarray(idx_ho, jnp.int32))
+    return DeltaNetworkParams(
+        layers,
+        jnp.asarray(w_ih, weight_dtype),
+        jnp.asarray(w_ho, weight_dtype),
+        jnp.asarray(idx_ih, jnp.int32),
+        jnp.asarray(idx_ho, jnp.int32),
+    )
 
 
 def _fanin(conn: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -296,11 +311,15 @@ def delta_network_init(params: DeltaNetworkParams) -> DeltaNetworkState:
 def _jumps(params: DeltaNetworkParams, state: DeltaNetworkState) -> tuple[jax.Array, jax.Array]:
     """Voltage jumps of the hidden and output neurons from last step's spikes."""
     if params.idx_ih.ndim == 2:  # fan-in gather
-        return ((state.spikes_in[params.idx_ih] * params.w_ih).sum(-1),
-                (state.spikes_hid[params.idx_ho] * params.w_ho).sum(-1))
+        return (
+            (state.spikes_in[params.idx_ih] * params.w_ih).sum(-1),
+            (state.spikes_hid[params.idx_ho] * params.w_ho).sum(-1),
+        )
     f32 = jnp.float32
-    return (jnp.matmul(state.spikes_in.astype(params.w_ih.dtype), params.w_ih, preferred_element_type=f32),
-            jnp.matmul(state.spikes_hid.astype(params.w_ho.dtype), params.w_ho, preferred_element_type=f32))
+    return (
+        jnp.matmul(state.spikes_in.astype(params.w_ih.dtype), params.w_ih, preferred_element_type=f32),
+        jnp.matmul(state.spikes_hid.astype(params.w_ho.dtype), params.w_ho, preferred_element_type=f32),
+    )
 
 
 def _next_state(state: DeltaNetworkState, layers, fired) -> DeltaNetworkState:
@@ -308,8 +327,9 @@ def _next_state(state: DeltaNetworkState, layers, fired) -> DeltaNetworkState:
     return DeltaNetworkState(tuple(layers), fired[0].astype(jnp.float32), fired[1].astype(jnp.float32), counts)
 
 
-def delta_network_step(params: DeltaNetworkParams, state: DeltaNetworkState,
-                       current: jax.Array) -> tuple[DeltaNetworkState, tuple[jax.Array, ...]]:
+def delta_network_step(
+    params: DeltaNetworkParams, state: DeltaNetworkState, current: jax.Array
+) -> tuple[DeltaNetworkState, tuple[jax.Array, ...]]:
     """One step of the network: `spikejax.lif_step` for each layer, Eq. (6)-(7) of the RoboBee paper.
 
     The input layer integrates its currents; the hidden and output layers
@@ -340,8 +360,9 @@ def delta_network_step(params: DeltaNetworkParams, state: DeltaNetworkState,
     return _next_state(state, layers, fired), tuple(fired)
 
 
-def delta_network_step_fused(params: DeltaNetworkParams, state: DeltaNetworkState,
-                             current: jax.Array) -> tuple[DeltaNetworkState, tuple[jax.Array, ...]]:
+def delta_network_step_fused(
+    params: DeltaNetworkParams, state: DeltaNetworkState, current: jax.Array
+) -> tuple[DeltaNetworkState, tuple[jax.Array, ...]]:
     """The same step as `delta_network_step`, as one exact LIF update of all 350 neurons.
 
     ``v <- v_inf + (v - v_inf) exp(-dt / tau) + jump`` with per-neuron ``tau``,

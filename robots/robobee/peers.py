@@ -62,28 +62,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from robots.robobee.controller import TORQUE_UNIT
-from robots.robobee.controller import ControllerConfig
-from robots.robobee.controller import controller_params
-from robots.robobee.controller import controller_init
-from robots.robobee.delta_network import DT
-from robots.robobee.delta_network import LAYER_SLICES
-from robots.robobee.delta_network import N_HIDDEN
-from robots.robobee.delta_network import N_INPUT
-from robots.robobee.delta_network import N_NEURONS
-from robots.robobee.delta_network import N_OUTPUT
-from robots.robobee.delta_network import T_REF
-from robots.robobee.delta_network import TAUS
-from robots.robobee.delta_network import NetworkSpec
-from robots.robobee.delta_network import input_currents
-from robots.robobee.delta_network import make_network
-from robots.robobee.delta_network import n_steps_of
-from robots.robobee.delta_network import result_row
+from robots.robobee.controller import TORQUE_UNIT, ControllerConfig, controller_init, controller_params
+from robots.robobee.delta_network import (
+    DT,
+    LAYER_SLICES,
+    N_HIDDEN,
+    N_INPUT,
+    N_NEURONS,
+    N_OUTPUT,
+    T_REF,
+    TAUS,
+    NetworkSpec,
+    input_currents,
+    make_network,
+    n_steps_of,
+    result_row,
+)
 from robots.robobee.flight import flight_plan
-from robots.robobee.lqr import altitude_params
-from robots.robobee.lqr import lateral_gain
-from robots.robobee.params import robobee_params
-from robots.robobee.params import max_lift
+from robots.robobee.lqr import altitude_params, lateral_gain
+from robots.robobee.params import max_lift, robobee_params
 
 __all__ = [
     "Brian2Flight",
@@ -113,15 +110,16 @@ def _brian2_network(spec: NetworkSpec, current: np.ndarray):
     tau : second (constant)"""
     groups = []
     for sl, n in zip(LAYER_SLICES, (N_INPUT, N_HIDDEN, N_OUTPUT)):
-        g = b2.NeuronGroup(n, eqs, threshold="v >= v_th", reset="v = 0", refractory=T_REF * b2.second,
-                           method="exact")
+        g = b2.NeuronGroup(n, eqs, threshold="v >= v_th", reset="v = 0", refractory=T_REF * b2.second, method="exact")
         g.v_th = spec.v_th[sl]
         g.tau = spec.tau[sl] * b2.second
         groups.append(g)
     groups[0].i_ext = current
     synapses = []
-    for pre, post, conn, w in ((groups[0], groups[1], spec.conn_ih, spec.w_ih),
-                               (groups[1], groups[2], spec.conn_ho, spec.w_ho)):
+    for pre, post, conn, w in (
+        (groups[0], groups[1], spec.conn_ih, spec.w_ih),
+        (groups[1], groups[2], spec.conn_ho, spec.w_ho),
+    ):
         syn = b2.Synapses(pre, post, "w : 1 (constant)", on_pre="v_post += w * int(not_refractory_post)")
         i, j = np.nonzero(conn)
         syn.connect(i=i, j=j)
@@ -191,8 +189,16 @@ class Brian2RuntimeNetwork:
 
     @property
     def info(self) -> dict:
-        return result_row(self.impl, 1, self.n_steps, max(self.first_s - self.run_s, 0.0), self.run_s, self.counts,
-                          first_run_s=self.first_s, repeat_equal=self.repeat_equal)
+        return result_row(
+            self.impl,
+            1,
+            self.n_steps,
+            max(self.first_s - self.run_s, 0.0),
+            self.run_s,
+            self.counts,
+            first_run_s=self.first_s,
+            repeat_equal=self.repeat_equal,
+        )
 
 
 def run_brian2_runtime(duration: float, seed: int, target: str = "cython", repeats: int = 1) -> dict:
@@ -313,15 +319,34 @@ class NestNetwork:
         layers = []
         for sl, n, tau_s in zip(LAYER_SLICES, (N_INPUT, N_HIDDEN, N_OUTPUT), TAUS):
             tau_ms = tau_s * 1e3
-            layers.append(nest.Create("iaf_psc_delta", n, params={
-                "tau_m": tau_ms, "C_m": tau_ms, "E_L": 0.0, "V_reset": 0.0, "V_m": 0.0,
-                "t_ref": (T_REF - DT) * 1e3, "I_e": 0.0, "V_th": list(spec.v_th[sl])}))
+            layers.append(
+                nest.Create(
+                    "iaf_psc_delta",
+                    n,
+                    params={
+                        "tau_m": tau_ms,
+                        "C_m": tau_ms,
+                        "E_L": 0.0,
+                        "V_reset": 0.0,
+                        "V_m": 0.0,
+                        "t_ref": (T_REF - DT) * 1e3,
+                        "I_e": 0.0,
+                        "V_th": list(spec.v_th[sl]),
+                    },
+                )
+            )
         layers[0].I_e = list(self.current)
-        for pre, post, conn, w in ((layers[0], layers[1], spec.conn_ih, spec.w_ih),
-                                   (layers[1], layers[2], spec.conn_ho, spec.w_ho)):
+        for pre, post, conn, w in (
+            (layers[0], layers[1], spec.conn_ih, spec.w_ih),
+            (layers[1], layers[2], spec.conn_ho, spec.w_ho),
+        ):
             i, j = np.nonzero(conn)
-            nest.Connect(np.asarray(pre.tolist())[i], np.asarray(post.tolist())[j], "one_to_one",
-                         {"synapse_model": "static_synapse", "weight": w[i, j], "delay": np.full(len(i), DT * 1e3)})
+            nest.Connect(
+                np.asarray(pre.tolist())[i],
+                np.asarray(post.tolist())[j],
+                "one_to_one",
+                {"synapse_model": "static_synapse", "weight": w[i, j], "delay": np.full(len(i), DT * 1e3)},
+            )
         recorder = nest.Create("spike_recorder")
         nest.Connect(layers[0] + layers[1] + layers[2], recorder)
         nest.Prepare()
@@ -382,8 +407,17 @@ class Brian2Flight:
         counts: spikes per neuron so far, input then hidden then output, ``(350,)``.
     """
 
-    def __init__(self, key: jax.Array, hold_steps: int, segment_steps: int, *, learn: bool = True,
-                 use_snn: bool = True, robot=None, record_every: int = RECORD_EVERY):
+    def __init__(
+        self,
+        key: jax.Array,
+        hold_steps: int,
+        segment_steps: int,
+        *,
+        learn: bool = True,
+        use_snn: bool = True,
+        robot=None,
+        record_every: int = RECORD_EVERY,
+    ):
         import brian2 as b2
 
         config, cp = ControllerConfig(), controller_params()
@@ -436,16 +470,24 @@ class Brian2Flight:
         thresholds = (state.v_th_input, state.v_th_hidden, state.v_th_output)
         self.groups = []
         for n, tau, v_th, name in zip(sizes, taus, thresholds, ("input", "hidden", "output")):
-            g = b2.NeuronGroup(n, eqs, threshold="v >= v_th", reset="v = 0", refractory=f(cp.t_ref) * b2.second,
-                               method="exact", name=f"robobee_{name}*")
+            g = b2.NeuronGroup(
+                n,
+                eqs,
+                threshold="v >= v_th",
+                reset="v = 0",
+                refractory=f(cp.t_ref) * b2.second,
+                method="exact",
+                name=f"robobee_{name}*",
+            )
             g.v_th = v_th
             g.tau = tau * b2.second
             self.groups.append(g)
         self.synapses, self.pre_index = [], []
         masks = [np.asarray(m, np.float64) for m in (state.mask_ih, state.mask_ho)]
         weights = [np.asarray(w, np.float64) for w in (state.w_ih, state.w_ho)]
-        for (pre, post), mask, w, c in zip(zip(self.groups, self.groups[1:]), masks, weights,
-                                           (f(cp.syn_hidden), f(cp.syn_output))):
+        for (pre, post), mask, w, c in zip(
+            zip(self.groups, self.groups[1:]), masks, weights, (f(cp.syn_hidden), f(cp.syn_output))
+        ):
             syn = b2.Synapses(pre, post, "w : 1", on_pre="I_post += c_syn * w", namespace={"c_syn": c})
             i, j = np.nonzero(mask)
             syn.connect(i=i, j=j)
@@ -575,8 +617,13 @@ class Brian2Flight:
         """What was recorded every ``record_every`` steps: ``t``, ``q``, ``target``, ``y_hat``, ``y_lqr`` (as `fly`)."""
         rec = np.array(self.records, np.float64).reshape(-1, 14)
         n = len(rec)
-        return dict(t=(np.arange(n) + 1) * self.record_every * self.dt, q=rec[:, :6], target=rec[:, 6:12],
-                    y_hat=rec[:, 12], y_lqr=rec[:, 13])
+        return dict(
+            t=(np.arange(n) + 1) * self.record_every * self.dt,
+            q=rec[:, :6],
+            target=rec[:, 6:12],
+            y_hat=rec[:, 12],
+            y_lqr=rec[:, 13],
+        )
 
 
 class Brian2FlightRun:
@@ -604,8 +651,18 @@ class Brian2FlightRun:
         warmup_steps: steps of the code-generating first run.
     """
 
-    def __init__(self, key, hold_steps: int, segment_steps: int, n_steps: int, target: str = "cython", *,
-                 learn: bool = True, use_snn: bool = True, warmup_steps: int = RECORD_EVERY):
+    def __init__(
+        self,
+        key,
+        hold_steps: int,
+        segment_steps: int,
+        n_steps: int,
+        target: str = "cython",
+        *,
+        learn: bool = True,
+        use_snn: bool = True,
+        warmup_steps: int = RECORD_EVERY,
+    ):
         import brian2 as b2
 
         if isinstance(key, np.ndarray):
@@ -643,8 +700,13 @@ class Brian2FlightRun:
                 w = np.zeros(mask.shape)
                 w[np.nonzero(mask)] = np.asarray(syn.w[:])
                 dense.append(w)
-            self._first = dict(recording=flight.recording(), counts=flight.counts.copy(), op_s=flight.op_s,
-                               w_ih=dense[0], w_ho=dense[1])
+            self._first = dict(
+                recording=flight.recording(),
+                counts=flight.counts.copy(),
+                op_s=flight.op_s,
+                w_ih=dense[0],
+                w_ho=dense[1],
+            )
         return seconds
 
     @property
@@ -654,5 +716,6 @@ class Brian2FlightRun:
             t0 = time.perf_counter()
             self.flight.run(self.warmup_steps)
             self._prepare_s = time.perf_counter() - t0
-        return dict(impl=self.impl, build_s=self.build_s, run_s=self.run_s, prepare_s=self._prepare_s,
-                    **(self._first or {}))
+        return dict(
+            impl=self.impl, build_s=self.build_s, run_s=self.run_s, prepare_s=self._prepare_s, **(self._first or {})
+        )

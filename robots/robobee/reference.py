@@ -10,16 +10,18 @@ import time
 
 import numpy as np
 
-from robots.robobee.delta_network import DT
-from robots.robobee.delta_network import N_HIDDEN
-from robots.robobee.delta_network import N_INPUT
-from robots.robobee.delta_network import N_NEURONS
-from robots.robobee.delta_network import N_OUTPUT
-from robots.robobee.delta_network import T_REF
-from robots.robobee.delta_network import input_currents
-from robots.robobee.delta_network import make_network
-from robots.robobee.delta_network import n_steps_of
-from robots.robobee.delta_network import result_row
+from robots.robobee.delta_network import (
+    DT,
+    N_HIDDEN,
+    N_INPUT,
+    N_NEURONS,
+    N_OUTPUT,
+    T_REF,
+    input_currents,
+    make_network,
+    n_steps_of,
+    result_row,
+)
 
 __all__ = ["NumpyNetworkRun", "run_numpy"]
 
@@ -52,8 +54,9 @@ def run_numpy(duration: float, seed: int, network: int = 0, dtype=np.float64) ->
     margin = np.inf
     t0 = time.perf_counter()
     for _ in range(n_steps):
-        jumps = np.concatenate([np.zeros(N_INPUT, dtype), spikes[:N_INPUT] @ w_ih,
-                                spikes[N_INPUT:N_INPUT + N_HIDDEN] @ w_ho])
+        jumps = np.concatenate(
+            [np.zeros(N_INPUT, dtype), spikes[:N_INPUT] @ w_ih, spikes[N_INPUT : N_INPUT + N_HIDDEN] @ w_ho]
+        )
         v_free = v_inf + (v - v_inf) * decay + jumps
         held = refractory > 0
         margin = min(margin, float(np.abs(v_free[~held] - v_th[~held]).min(initial=np.inf)))

@@ -52,16 +52,17 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from spikejax.benchmarking import Processes
-from spikejax.benchmarking import add_ratios
-from spikejax.benchmarking import compile_ahead
-from spikejax.benchmarking import cores_label
-from spikejax.benchmarking import interleaved
-from spikejax.benchmarking import machine_banner
-from spikejax.benchmarking import plot_rows
-from spikejax.benchmarking import write_csv
-from spikejax.commands import Command
-from spikejax.commands import count
+from spikejax.benchmarking import (
+    Processes,
+    add_ratios,
+    compile_ahead,
+    cores_label,
+    interleaved,
+    machine_banner,
+    plot_rows,
+    write_csv,
+)
+from spikejax.commands import Command, count
 from spikejax.errors import UserError
 
 # The snake's modules are imported where they are used: they make JAX arrays when
@@ -94,8 +95,21 @@ MIN_CONTROL_STEPS = 5
 MJX_CPU_MAX_BATCH = 64
 LOOP = "env step (physics + camera + events)"
 
-ROW_FIELDS = ("impl", "loop", "batch", "control_steps", "compile_s", "run_s", "env_steps_per_s",
-              "physics_steps_per_s", "sim_s_per_wall_s", "vs_c_physics", "episode_wall_s", "cores", "parallel")
+ROW_FIELDS = (
+    "impl",
+    "loop",
+    "batch",
+    "control_steps",
+    "compile_s",
+    "run_s",
+    "env_steps_per_s",
+    "physics_steps_per_s",
+    "sim_s_per_wall_s",
+    "vs_c_physics",
+    "episode_wall_s",
+    "cores",
+    "parallel",
+)
 
 
 def _control_steps(batch: int, substeps: int, budget: int) -> int:
@@ -104,11 +118,21 @@ def _control_steps(batch: int, substeps: int, budget: int) -> int:
 
 def _row(impl, loop, batch, n, compile_s, run_s, substeps, control_dt, threads) -> dict:
     env_steps = batch * n / run_s
-    return dict(impl=impl, loop=loop, batch=batch, control_steps=n, compile_s=compile_s, run_s=run_s,
-                env_steps_per_s=env_steps, physics_steps_per_s=env_steps * substeps,
-                sim_s_per_wall_s=env_steps * control_dt, vs_c_physics=math.nan,
-                episode_wall_s=EPISODE_STEPS * batch / env_steps, cores=threads,
-                parallel=cores_label(threads, "thread"))
+    return dict(
+        impl=impl,
+        loop=loop,
+        batch=batch,
+        control_steps=n,
+        compile_s=compile_s,
+        run_s=run_s,
+        env_steps_per_s=env_steps,
+        physics_steps_per_s=env_steps * substeps,
+        sim_s_per_wall_s=env_steps * control_dt,
+        vs_c_physics=math.nan,
+        episode_wall_s=EPISODE_STEPS * batch / env_steps,
+        cores=threads,
+        parallel=cores_label(threads, "thread"),
+    )
 
 
 def _steers(batch: int) -> np.ndarray:
@@ -125,8 +149,7 @@ class CPhysicsRun:
     """
 
     def __init__(self, batch: int, n: int, *, nthread: int = 1):
-        from robots.snake.gait import gait_params
-        from robots.snake.gait import joint_targets
+        from robots.snake.gait import gait_params, joint_targets
         from robots.snake.physics import make_physics
 
         phys = make_physics("mujoco")
@@ -149,8 +172,14 @@ class CPhysicsRun:
 
     def __call__(self) -> float:
         t0 = time.perf_counter()
-        self.pool.rollout([self.model] * self.batch, self.datas, self.state, self.control, state=self.out,
-                          chunk_size=max(1, self.batch // max(self.threads, 1)))
+        self.pool.rollout(
+            [self.model] * self.batch,
+            self.datas,
+            self.state,
+            self.control,
+            state=self.out,
+            chunk_size=max(1, self.batch // max(self.threads, 1)),
+        )
         seconds = time.perf_counter() - t0
         if not np.all(np.isfinite(self.out[:, -1])):
             raise RuntimeError("MuJoCo C rollout diverged")
@@ -160,8 +189,17 @@ class CPhysicsRun:
     @property
     def info(self) -> dict:
         threads, phys = max(self.threads, 1), self.phys
-        return _row("MuJoCo C physics only", f"physics only, {threads} thread(s)", self.batch, self.n, 0.0,
-                    self.run_s, phys.substeps, phys.dt * phys.substeps, threads)
+        return _row(
+            "MuJoCo C physics only",
+            f"physics only, {threads} thread(s)",
+            self.batch,
+            self.n,
+            0.0,
+            self.run_s,
+            phys.substeps,
+            phys.dt * phys.substeps,
+            threads,
+        )
 
     def close(self) -> None:
         self.pool.__exit__(None, None, None)
@@ -229,8 +267,17 @@ class ClosedLoopRun:
     @property
     def info(self) -> dict:
         phys = self.phys
-        return _row(f"{self.backend} backend closed loop", LOOP, self.batch, self.n, self.compile_s, self.run_s,
-                    phys.substeps, phys.dt * phys.substeps, self.threads)
+        return _row(
+            f"{self.backend} backend closed loop",
+            LOOP,
+            self.batch,
+            self.n,
+            self.compile_s,
+            self.run_s,
+            phys.substeps,
+            phys.dt * phys.substeps,
+            self.threads,
+        )
 
 
 def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2, nthread: int | None = None) -> dict:
@@ -242,9 +289,18 @@ def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2, nth
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    plot_rows(rows, path, x="batch", y="env_steps_per_s", series=lambda r: f"{r['impl']}, {r['parallel']}",
-              xbase=2, size=(6, 4), xlabel="batch (snakes)", ylabel="env-steps/s (20 ms control steps)",
-              title="snake: throughput, compile time excluded")
+    plot_rows(
+        rows,
+        path,
+        x="batch",
+        y="env_steps_per_s",
+        series=lambda r: f"{r['impl']}, {r['parallel']}",
+        xbase=2,
+        size=(6, 4),
+        xlabel="batch (snakes)",
+        ylabel="env-steps/s (20 ms control steps)",
+        title="snake: throughput, compile time excluded",
+    )
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -252,13 +308,21 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="write snake.csv and snake.png here")
     parser.add_argument("--quick", action="store_true", help="a batch of 2, a short run, no MJX")
     parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 2)")
-    parser.add_argument("--threads", type=count, default=None,
-                        help="MuJoCo C threads of the all-cores rows (default: one per core)")
+    parser.add_argument(
+        "--threads", type=count, default=None, help="MuJoCo C threads of the all-cores rows (default: one per core)"
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def run(*, trials: int | None = None, out: str | None = None, quick: bool = False, repeats: int | None = None,
-        threads: int | None = None, no_progress: bool = False) -> int:
+def run(
+    *,
+    trials: int | None = None,
+    out: str | None = None,
+    quick: bool = False,
+    repeats: int | None = None,
+    threads: int | None = None,
+    no_progress: bool = False,
+) -> int:
     """``spikejax bench snake``: print the table; write ``snake.csv`` and ``snake.png`` to ``out``.
 
     Args:
@@ -283,17 +347,21 @@ def run(*, trials: int | None = None, out: str | None = None, quick: bool = Fals
 
     phys = make_physics("mujoco")
     print(machine_banner(mujoco=mujoco.__version__))
-    print(f"snake (17 modules, tuned model): control step {phys.dt * phys.substeps * 1e3:.0f} ms = "
-          f"{phys.substeps} x {phys.dt * 1e3:.0f} ms physics steps; the paper's episode: {EPISODE_STEPS:,} "
-          f"control steps, {EPISODE_SECONDS:,} s simulated")
+    print(
+        f"snake (17 modules, tuned model): control step {phys.dt * phys.substeps * 1e3:.0f} ms = "
+        f"{phys.substeps} x {phys.dt * 1e3:.0f} ms physics steps; the paper's episode: {EPISODE_STEPS:,} "
+        f"control steps, {EPISODE_SECONDS:,} s simulated"
+    )
     from tqdm import tqdm
 
     mjx_batches = batches
     if jax.devices()[0].platform == "cpu":
         mjx_batches = tuple(b for b in batches if b <= MJX_CPU_MAX_BATCH)
         if mjx_batches != batches:
-            print(f"mjx on a CPU: batches above {MJX_CPU_MAX_BATCH} skipped (they can hang there, "
-                  f"docs/ARCHITECTURE.md; and run at a few hundred env-steps/s)")
+            print(
+                f"mjx on a CPU: batches above {MJX_CPU_MAX_BATCH} skipped (they can hang there, "
+                f"docs/ARCHITECTURE.md; and run at a few hundred env-steps/s)"
+            )
     rows = []
     bar = tqdm(batches, desc="snake bench", disable=no_progress)
     for batch in bar:
@@ -315,18 +383,30 @@ def run(*, trials: int | None = None, out: str | None = None, quick: bool = Fals
                     mjx()
                     new.append(mjx.info()[0])
         for r in new:
-            bar.write(f"  {r['impl']}, batch {batch}, {r['parallel']}: {r['env_steps_per_s']:,.0f} env-steps/s "
-                      f"(compile {r['compile_s']:.1f} s)")
+            bar.write(
+                f"  {r['impl']}, batch {batch}, {r['parallel']}: {r['env_steps_per_s']:,.0f} env-steps/s "
+                f"(compile {r['compile_s']:.1f} s)"
+            )
         rows.extend(new)
-    add_ratios(rows, "vs_c_physics", "env_steps_per_s",
-               lambda p, r: p["impl"].startswith("MuJoCo C") and p["batch"] == r["batch"])
-    print(f"{'implementation':34s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} {'env-steps/s':>11s} "
-          f"{'sim s/s':>8s} {'vs C':>6s} {'episode':>9s}")
+    add_ratios(
+        rows,
+        "vs_c_physics",
+        "env_steps_per_s",
+        lambda p, r: p["impl"].startswith("MuJoCo C") and p["batch"] == r["batch"],
+    )
+    print(
+        f"{'implementation':34s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} {'env-steps/s':>11s} "
+        f"{'sim s/s':>8s} {'vs C':>6s} {'episode':>9s}"
+    )
     for r in rows:
-        print(f"{r['impl']:34s} {r['batch']:5d} {r['cores']:5d} {r['compile_s']:9.1f} {r['env_steps_per_s']:11,.0f} "
-              f"{r['sim_s_per_wall_s']:8.1f} {r['vs_c_physics']:6.2f} {r['episode_wall_s']:8.0f}s")
-    print(f"  loop timed: {LOOP}; vs C: against the C physics at the same batch on as many threads; "
-          f"episode: wall time of one {EPISODE_STEPS:,}-step episode per snake")
+        print(
+            f"{r['impl']:34s} {r['batch']:5d} {r['cores']:5d} {r['compile_s']:9.1f} {r['env_steps_per_s']:11,.0f} "
+            f"{r['sim_s_per_wall_s']:8.1f} {r['vs_c_physics']:6.2f} {r['episode_wall_s']:8.0f}s"
+        )
+    print(
+        f"  loop timed: {LOOP}; vs C: against the C physics at the same batch on as many threads; "
+        f"episode: wall time of one {EPISODE_STEPS:,}-step episode per snake"
+    )
     if out:
         out = Path(out)
         write_csv(out / "snake.csv", rows, ROW_FIELDS)
@@ -335,5 +415,9 @@ def run(*, trials: int | None = None, out: str | None = None, quick: bool = Fals
     return 0
 
 
-command = Command(help="snake env-steps per second, both physics backends against MuJoCo C",
-                  add_arguments=_add_arguments, run=run, description=__doc__.splitlines()[0])
+command = Command(
+    help="snake env-steps per second, both physics backends against MuJoCo C",
+    add_arguments=_add_arguments,
+    run=run,
+    description=__doc__.splitlines()[0],
+)

@@ -74,22 +74,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spikejax.benchmarking import JaxRun
-from spikejax.benchmarking import Processes
-from spikejax.benchmarking import add_ratios
-from spikejax.benchmarking import batch_sizes
-from spikejax.benchmarking import compile_ahead
-from spikejax.benchmarking import cores_label
-from spikejax.benchmarking import interleaved
-from spikejax.benchmarking import machine_banner
-from spikejax.benchmarking import plot_rows
-from spikejax.benchmarking import write_csv
-from spikejax.commands import Command
-from spikejax.commands import count
-from spikejax.devices import cpu_devices_for_run
-from spikejax.devices import shard_batch
+from spikejax.benchmarking import (
+    JaxRun,
+    Processes,
+    add_ratios,
+    batch_sizes,
+    compile_ahead,
+    cores_label,
+    interleaved,
+    machine_banner,
+    plot_rows,
+    write_csv,
+)
+from spikejax.commands import Command, count
+from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
+from spikejax.vision.hough.reference import async_run_numpy
 
 __all__ = ["PEERS", "TABLE1", "command", "frames", "mode_difference", "run"]
 
@@ -102,8 +103,24 @@ TABLE1 = [
 ]
 CAPACITY = 2304
 N_FRAMES = 8
-COLUMNS = ["shape", "implementation", "mode", "batch", "frames", "events", "compile_s", "run_s", "frames_per_s",
-           "events_per_s", "device", "devices", "cores", "parallel", "peer", "x_peer"]
+COLUMNS = [
+    "shape",
+    "implementation",
+    "mode",
+    "batch",
+    "frames",
+    "events",
+    "compile_s",
+    "run_s",
+    "frames_per_s",
+    "events_per_s",
+    "device",
+    "devices",
+    "cores",
+    "parallel",
+    "peer",
+    "x_peer",
+]
 
 
 def frames(shape: str, n: int = N_FRAMES) -> tuple:
@@ -156,7 +173,8 @@ class _PeerRun:
                 one = lambda im: cv2.HoughLines(im, 1, np.pi / 180, 60)  # noqa: E731
             else:
                 one = lambda im: cv2.HoughCircles(  # noqa: E731
-                    im, cv2.HOUGH_GRADIENT, dp=1, minDist=8, param1=100, param2=20, minRadius=1, maxRadius=64)
+                    im, cv2.HOUGH_GRADIENT, dp=1, minDist=8, param1=100, param2=20, minRadius=1, maxRadius=64
+                )
         images = list(frames_in)
         self.info = (len(images), float(events_per_frame) * len(images))
 
@@ -181,50 +199,31 @@ PEERS = (
     ("line", "NumPy per-event loop", "async"),
 )
 # The peer every row's ratio is taken to, by (shape, mode).
-RATIO_PEER = {("line", "sync"): "skimage hough_line", ("line", "per frame"): "skimage hough_line",
-              ("circle", "sync"): "skimage hough_circle", ("circle", "per frame"): "skimage hough_circle",
-              ("line", "async"): "NumPy per-event loop"}
+RATIO_PEER = {
+    ("line", "sync"): "skimage hough_line",
+    ("line", "per frame"): "skimage hough_line",
+    ("circle", "sync"): "skimage hough_circle",
+    ("circle", "per frame"): "skimage hough_circle",
+    ("line", "async"): "NumPy per-event loop",
+}
 
 
 def _numpy_async(events):
-    """Alg. 1 event by event in NumPy on the 180 x 180 grid (the first stream of ``events``): the plain way.
+    """Alg. 1 of the pipe paper event by event in NumPy on the 180 x 180 grid (the first stream): the plain way.
 
-    Returns a timer: each call runs the loop over the stream once and returns
-    its seconds; ``n_events`` is the stream's events.
+    The loop is `spikejax.vision.hough.reference.async_run_numpy`, the library's
+    oracle. Returns a timer: each call runs the loop over the stream once and
+    returns its seconds; ``n_events`` is the stream's events.
     """
-    grid = hough.LineGrid()
-    table = hough.line_table(grid)
-    v_th, decay = 8.0, 50.0
-    x, y, t, p, ok = (np.asarray(a[0]) for a in events)
-    n = int(ok.sum())
-    dk, dj = np.meshgrid(np.arange(-1, 2), np.arange(-1, 2), indexing="ij")
-
-    def run():
-        v = np.zeros(grid.size + 1)
-        last = np.zeros(grid.size + 1)
-        spikes = 0
-        for i in range(n):
-            cells = table[y[i] * grid.width + x[i]]
-            vv = v[cells]
-            vv = np.sign(vv) * np.maximum(np.abs(vv) - decay * (t[i] - last[cells]), 0.0) + p[i]
-            v[cells] = vv
-            last[cells] = t[i]
-            fired = np.abs(vv) >= v_th
-            if fired.any():
-                spikes += int(fired.sum())
-                k = np.flatnonzero(fired)
-                rho = cells[k] - k * grid.n_rho
-                nk, nj = (k[:, None, None] + dk).ravel(), (rho[:, None, None] + dj).ravel()
-                inside = (nk >= 0) & (nk < grid.n_theta) & (nj >= 0) & (nj < grid.n_rho)
-                v[nk[inside] * grid.n_rho + nj[inside]] = 0.0
-        return spikes
+    params, grid = hough.hough_params(8.0, 50.0), hough.LineGrid()
+    stream = jax.tree.map(lambda a: np.asarray(a[:1]), events)
 
     def timer() -> float:
         t0 = time.perf_counter()
-        run()
+        async_run_numpy(params, grid, stream)
         return time.perf_counter() - t0
 
-    timer.n_events = n
+    timer.n_events = int(np.asarray(events.valid[0]).sum())
     return timer
 
 
@@ -252,10 +251,19 @@ def _spikejax(shape: str, mode: str, events, batch: int, devices: int):
     fn = shard_batch(jax.vmap(one), jax.devices()[:devices])
     streams = _batched(events, batch)
     compiled, compile_s = compile_ahead(fn, streams)
-    row = dict(shape=shape, implementation=f"spikejax {type(grid).__name__} (votes + LIF + inhibition){_on(devices)}",
-               mode=mode, batch=batch, frames=n_frames, events=n_events, compile_s=compile_s,
-               device=jax.devices()[0].platform, devices=devices, cores=devices,
-               parallel=cores_label(devices, "device"))
+    row = dict(
+        shape=shape,
+        implementation=f"spikejax {type(grid).__name__} (votes + LIF + inhibition){_on(devices)}",
+        mode=mode,
+        batch=batch,
+        frames=n_frames,
+        events=n_events,
+        compile_s=compile_s,
+        device=jax.devices()[0].platform,
+        devices=devices,
+        cores=devices,
+        parallel=cores_label(devices, "device"),
+    )
     return JaxRun(compiled, streams), row
 
 
@@ -274,8 +282,12 @@ def mode_difference(events, params=None) -> dict:
     _, asyn = hough.async_run(params, grid, events, hough.init(grid, times[0]))
     sync, asyn = np.asarray(sync), np.asarray(asyn)
     both = np.sum((sync == asyn) & (asyn != 0))
-    return dict(slots=n_slots, sync_spikes=int(np.count_nonzero(sync)), async_spikes=int(np.count_nonzero(asyn)),
-                shared=float(both / max(np.count_nonzero(asyn), 1)))
+    return dict(
+        slots=n_slots,
+        sync_spikes=int(np.count_nonzero(sync)),
+        async_spikes=int(np.count_nonzero(asyn)),
+        shared=float(both / max(np.count_nonzero(asyn), 1)),
+    )
 
 
 # The batch sizes timed: powers of 4 up to --trials, and --trials itself.
@@ -283,17 +295,31 @@ POWERS_OF_4 = tuple(4**k for k in range(16))
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--trials", type=count, default=None,
-                        help="largest batch of streams (default 1024; circles stop at 64, async at 256)")
+    parser.add_argument(
+        "--trials",
+        type=count,
+        default=None,
+        help="largest batch of streams (default 1024; circles stop at 64, async at 256)",
+    )
     parser.add_argument("--out", default=None, help="write hough.csv and hough.png here")
     parser.add_argument("--repeats", type=count, default=None, help="timed runs per row, the best kept (default 5)")
-    parser.add_argument("--cpu-devices", type=count, default=None,
-                        help="CPU devices JAX presents (default: one per core); also the peers' processes")
+    parser.add_argument(
+        "--cpu-devices",
+        type=count,
+        default=None,
+        help="CPU devices JAX presents (default: one per core); also the peers' processes",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def run(*, trials: int | None = None, out: str | None = None, repeats: int | None = None,
-        cpu_devices: int | None = None, no_progress: bool = False) -> int:
+def run(
+    *,
+    trials: int | None = None,
+    out: str | None = None,
+    repeats: int | None = None,
+    cpu_devices: int | None = None,
+    no_progress: bool = False,
+) -> int:
     """``spikejax bench hough``: print the table and write ``hough.csv`` and ``hough.png`` to ``out``.
 
     Args:
@@ -318,8 +344,10 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
     circle_events, circle_images = frames("circle")
     line_counts = np.asarray(line_events.count())
     circle_counts = np.asarray(circle_events.count())
-    print(f"frames: 128 x 128; line scene {line_counts.mean():.0f} events/frame, circle scene "
-          f"{circle_counts.mean():.0f} events/frame ({N_FRAMES} frames each, one event per pixel)")
+    print(
+        f"frames: 128 x 128; line scene {line_counts.mean():.0f} events/frame, circle scene "
+        f"{circle_counts.mean():.0f} events/frame ({N_FRAMES} frames each, one event per pixel)"
+    )
 
     from tqdm import tqdm
 
@@ -336,9 +364,19 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
                 units, events = runner.info()[0]
                 impl = name + ("" if p == 1 else f", {p} processes")
                 runs[impl, mode] = runner
-                rows[impl, mode] = dict(shape=shape, implementation=impl, mode=mode, batch=p, frames=units * p,
-                                        events=events * p, compile_s=None, device="cpu", devices=1, cores=p,
-                                        parallel=cores_label(p, "process"))
+                rows[impl, mode] = dict(
+                    shape=shape,
+                    implementation=impl,
+                    mode=mode,
+                    batch=p,
+                    frames=units * p,
+                    events=events * p,
+                    compile_s=None,
+                    device="cpu",
+                    devices=1,
+                    cores=p,
+                    parallel=cores_label(p, "process"),
+                )
         # Two slots a stream for circles: the circle grid's run time does not depend on the events.
         two = jax.tree.map(lambda a: a[:2], circle_events)
         jobs = [("line", "sync", line_events, b) for b in batch_sizes(largest, POWERS_OF_4)]
@@ -355,16 +393,19 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
     rows = list(rows.values())
     for row, run_s in zip(rows, best.values()):
         row.update(run_s=run_s, frames_per_s=row["frames"] / run_s, events_per_s=row["events"] / run_s)
-    add_ratios(rows, "x_peer", "frames_per_s",
-               lambda p, r: p["implementation"].startswith(RATIO_PEER[r["shape"], r["mode"]]))
+    add_ratios(
+        rows, "x_peer", "frames_per_s", lambda p, r: p["implementation"].startswith(RATIO_PEER[r["shape"], r["mode"]])
+    )
     for r in rows:  # async: a frame is a stream's one slot, the peer's too, so the ratio is that of events/s
         r["peer"] = RATIO_PEER[r["shape"], r["mode"]]
 
     _print(rows, n_dev)
     diff = mode_difference(line_events)
-    print(f"\nsync vs async on the line frames ({diff['slots']} slots of ~{line_counts.mean():.0f} events, "
-          f"v_th = 8, decay = 50/s): {diff['sync_spikes']} sync spikes, {diff['async_spikes']} async spikes, "
-          f"{100 * diff['shared']:.0f} % of the async spikes also in sync")
+    print(
+        f"\nsync vs async on the line frames ({diff['slots']} slots of ~{line_counts.mean():.0f} events, "
+        f"v_th = 8, decay = 50/s): {diff['sync_spikes']} sync spikes, {diff['async_spikes']} async spikes, "
+        f"{100 * diff['shared']:.0f} % of the async spikes also in sync"
+    )
     if out:
         out = Path(out)
         write_csv(out / "hough.csv", rows, COLUMNS)
@@ -375,42 +416,76 @@ def run(*, trials: int | None = None, out: str | None = None, repeats: int | Non
 
 def _plot(rows: list[dict], path: Path) -> None:
     paper = {"line": 40.74, "circle": 22.35}
-    plot_rows(rows, path, x="batch", y="frames_per_s", panel="shape", size=(11, 4.2),
-              series=lambda r: (f"{r['implementation']}, {r['mode']}" if r["implementation"].startswith("spikejax")
-                                else f"{r['implementation']} (one frame at a time)"),
-              flat=lambda r: not r["implementation"].startswith("spikejax"),
-              lines=lambda shape: [(paper[shape], "paper's best (GPU, Table 1)")],
-              xlabel="streams in the batch", ylabel="frames / s",
-              title=lambda shape: f"{shape} detection, 128 x 128 event frames")
+    plot_rows(
+        rows,
+        path,
+        x="batch",
+        y="frames_per_s",
+        panel="shape",
+        size=(11, 4.2),
+        series=lambda r: (
+            f"{r['implementation']}, {r['mode']}"
+            if r["implementation"].startswith("spikejax")
+            else f"{r['implementation']} (one frame at a time)"
+        ),
+        flat=lambda r: not r["implementation"].startswith("spikejax"),
+        lines=lambda shape: [(paper[shape], "paper's best (GPU, Table 1)")],
+        xlabel="streams in the batch",
+        ylabel="frames / s",
+        title=lambda shape: f"{shape} detection, 128 x 128 event frames",
+    )
 
 
 def _print(rows: list[dict], n_dev: int) -> None:
-    print(f"\n{'shape':7s} {'implementation':58s} {'mode':9s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} "
-          f"{'frames/s':>10s} {'M events/s':>10s} {'x peer':>7s}")
+    print(
+        f"\n{'shape':7s} {'implementation':58s} {'mode':9s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} "
+        f"{'frames/s':>10s} {'M events/s':>10s} {'x peer':>7s}"
+    )
     for r in rows:
         c = "" if r["compile_s"] is None else f"{r['compile_s']:.1f}"
-        print(f"{r['shape']:7s} {r['implementation']:58s} {r['mode']:9s} {r['batch']:5d} {r['cores']:5d} {c:>9s} "
-              f"{r['frames_per_s']:10.1f} {r['events_per_s'] / 1e6:10.3f} {r['x_peer']:7.2f}")
-    print("(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; "
-          "async in events/s)")
+        print(
+            f"{r['shape']:7s} {r['implementation']:58s} {r['mode']:9s} {r['batch']:5d} {r['cores']:5d} {c:>9s} "
+            f"{r['frames_per_s']:10.1f} {r['events_per_s'] / 1e6:10.3f} {r['x_peer']:7.2f}"
+        )
+    print(
+        "(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; async in events/s)"
+    )
     print("\nmeasured in this run (ratios to the peer on the same frames and cores; the best row):")
     for cores in sorted({1, n_dev}):
-        for shape, mode, unit in (("line", "sync", "frames"), ("circle", "sync", "frames"),
-                                  ("line", "async", "events")):
-            sel = [r for r in rows if r["shape"] == shape and r["mode"] == mode and r["cores"] == cores
-                   and r["implementation"].startswith("spikejax")]
+        for shape, mode, unit in (
+            ("line", "sync", "frames"),
+            ("circle", "sync", "frames"),
+            ("line", "async", "events"),
+        ):
+            sel = [
+                r
+                for r in rows
+                if r["shape"] == shape
+                and r["mode"] == mode
+                and r["cores"] == cores
+                and r["implementation"].startswith("spikejax")
+            ]
             if not sel:
                 continue
             best = max(sel, key=lambda r: r["x_peer"])
-            rate = (f"{best['frames_per_s']:.1f} frames/s" if unit == "frames"
-                    else f"{best['events_per_s'] / 1e6:.3f} M events/s")
-            print(f"  {shape}, {mode}, {cores} core{'s' if cores > 1 else ''}: {rate} at batch {best['batch']} = "
-                  f"{best['x_peer']:.2f} x {best['peer']} ({best['parallel']} against "
-                  f"{cores_label(cores, 'process')})")
+            rate = (
+                f"{best['frames_per_s']:.1f} frames/s"
+                if unit == "frames"
+                else f"{best['events_per_s'] / 1e6:.3f} M events/s"
+            )
+            print(
+                f"  {shape}, {mode}, {cores} core{'s' if cores > 1 else ''}: {rate} at batch {best['batch']} = "
+                f"{best['x_peer']:.2f} x {best['peer']} ({best['parallel']} against "
+                f"{cores_label(cores, 'process')})"
+            )
     print("\nTable 1 of the paper (whole pipe tracker, frames/s):")
     for case, hw, cpu, gpu in TABLE1:
         print(f"  {case:24s} {hw:34s} CPU {cpu:5.2f}  GPU {gpu:6.2f}")
 
 
-command = Command(help="spiking Hough detectors against scikit-image and OpenCV", add_arguments=_add_arguments,
-                  run=run, description=__doc__.splitlines()[0])
+command = Command(
+    help="spiking Hough detectors against scikit-image and OpenCV",
+    add_arguments=_add_arguments,
+    run=run,
+    description=__doc__.splitlines()[0],
+)
