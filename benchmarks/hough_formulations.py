@@ -5,7 +5,7 @@ reports ratios measured in one process: the candidates are timed in turn
 (interleaved), each round keeps the best of ``--repeats`` calls per candidate,
 and the ratio of each round is printed with the median over ``--rounds``.
 
-* votes only: :func:`hough.line_votes`, ``vmap`` over streams and slots, vs
+* votes only: `spikejax.vision.hough.line_votes`, ``vmap`` over streams and slots, vs
   ``skimage.transform.hough_line`` (the bare accumulator, 180 angles) on the
   same frames (frames/s);
 * whole detector, synchronous: ``vmap`` of `spikejax.vision.hough.sync_run` over streams

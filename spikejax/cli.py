@@ -29,7 +29,7 @@ def registered() -> dict[str, dict[str, EntryPoint]]:
 
 
 def load(point: EntryPoint) -> Command:
-    """The :class:`Command` an entry point names; a UserError if it names something else."""
+    """The `Command` an entry point names; a UserError if it names something else."""
     command = point.load()
     if not isinstance(command, Command):
         raise UserError(f"entry point {point.name} = {point.value} is not a spikejax.commands.Command")

@@ -1,7 +1,7 @@
 """Pipe detection on synthetic scenes of known geometry, and the ``spikejax detect pipe`` command.
 
-The scenes come from :mod:`spikejax.vision.scenes`; their events from the
-frame-difference DVS of :mod:`spikejax.vision.dvs`. Distances are those of a
+The scenes come from `spikejax.vision.scenes`; their events from the
+frame-difference DVS of `spikejax.vision.dvs`. Distances are those of a
 pinhole camera with a 60 degree field of view (focal length 110.85 pixels on
 128 columns): a pipe of diameter ``l`` at distance ``d`` is ``f l / d`` pixels wide.
 """

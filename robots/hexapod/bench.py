@@ -1,5 +1,7 @@
 """``spikejax bench gaits``: three-gait SCPG training trials per second, against plain NumPy loops.
 
+The trials are those of Alg. 1 of the hexapod SCPG paper (the training of `robots.hexapod.training`).
+
 The peer is what a researcher runs without spikejax: Alg. 1 as loops in NumPy,
 one trial at a time (`robots.hexapod.reference`, the same algorithm, the same
 initial weights and noise), in one process, and over a pool of one process a

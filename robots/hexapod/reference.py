@@ -3,7 +3,7 @@
 This is how the hexapod SCPG paper's algorithm reads (and how a researcher
 would run it without spikejax): loops over epochs, gaits, time steps and
 neurons. It uses the same initial weights and the same rule noise as
-:func:`robots.hexapod.training.train`, so the two must agree to rounding.
+`robots.hexapod.training.train`, so the two must agree to rounding.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 A command is registered as an entry point of the group ``spikejax.commands``,
 named ``GROUP.NAME`` for ``spikejax GROUP NAME`` (``reproduce.gaits``,
 ``bench.hough``, ``detect.pipe``) or ``NAME`` for ``spikejax NAME``
-(``sweep``, ``info``), and pointing at a :class:`Command`::
+(``sweep``, ``info``), and pointing at a `Command`::
 
     [project.entry-points."spikejax.commands"]
     "reproduce.gaits" = "robots.hexapod.reproduce:command"

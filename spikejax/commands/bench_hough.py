@@ -1,9 +1,11 @@
 """``spikejax bench hough``: spiking Hough detectors against scikit-image and OpenCV.
 
+The detectors are those of the pipe paper (Eq. (2)-(3) and Alg. 1, `spikejax.vision.hough`).
+
 Every detector works on the same synthetic event frames: a standing pipe swept
 sideways (two edges of opposite polarity, for lines) and a pipe entry drifting
 and growing (a ring, for circles), 128 x 128 pixels, about 2,200 and 1,350 events a frame
-(:func:`frames`). The peers get, per frame, the binary image of the pixels that
+(`frames`). The peers get, per frame, the binary image of the pixels that
 had an event, in the same run:
 
 * scikit-image ``hough_line`` (the bare accumulator, 180 angles) and
@@ -14,9 +16,9 @@ had an event, in the same run:
 
 spikejax runs the whole detector -- votes, the bipolar LIF of Alg. 1 and lateral
 inhibition -- in both modes, ``jax.jit(jax.vmap(...))`` over a batch of streams
-(one time slot per frame): :func:`spikejax.vision.hough.sync_run` on the paper's
+(one time slot per frame): `spikejax.vision.hough.sync_run` on the paper's
 180 x 180 line grid and 64 x 128 x 128 circle grid, and
-:func:`spikejax.vision.hough.async_run` event by event on the line grid.
+`spikejax.vision.hough.async_run` event by event on the line grid.
 Compile time (``lower(...).compile()``) is reported apart from run time (the
 best of ``--repeats`` runs, every implementation timed once a round,
 `spikejax.benchmarking.interleaved`). Frames/s and events/s count every
@@ -33,7 +35,7 @@ Formulations measured (ratios in ``docs/ARCHITECTURE.md``, "Hough formulations
 and why these won:
 
 * Line votes: scatter-adds of the ``n_theta`` cells of every event, read from a
-  static table of the rho bin of each (pixel, angle) (:func:`hough.line_table`),
+  static table of the rho bin of each (pixel, angle) (`spikejax.vision.hough.line_table`),
   gathered as uint16, summed in int32, 576 events at a time (the gathered cells
   stay in the L2 cache), and under ``vmap`` on a CPU one stream after another,
   each into its own accumulator (a custom batching rule): the scatter then runs
@@ -128,7 +130,7 @@ def frames(shape: str, n: int = N_FRAMES) -> tuple:
 
     ``shape`` is ``"line"`` (a standing pipe, tilted by 0.2 rad, 8 pixels a frame)
     or ``"circle"`` (a pipe entry of radius 30 drifting 8 and growing 4 pixels a
-    frame); about 2,200 and 1,350 events a frame, from :func:`dvs.frame_difference`.
+    frame); about 2,200 and 1,350 events a frame, from `spikejax.vision.dvs.frame_difference`.
     """
     if shape == "line":
         scene = scenes.standing_pipe(n_frames=n + 1, speed=8.0, tilt=0.2, start=30.0)
