@@ -427,7 +427,8 @@ def _read_metadata(out: Path) -> dict[str, Any] | None:
     try:
         metadata = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:
-        raise UserError(f"cannot read {path}: {str(err).splitlines()[0] if str(err) else err!r}") from None
+        reason = str(err).splitlines()[0] if str(err).strip() else type(err).__name__
+        raise UserError(f"cannot read {path}: {reason}") from None
     if not isinstance(metadata, dict) or metadata.get("format") != _METADATA_FORMAT:
         raise UserError(f"{path} is not the metadata of a spikejax sweep: choose another --out directory")
     for key, kind in _METADATA_KEYS.items():
