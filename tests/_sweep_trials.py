@@ -154,3 +154,10 @@ class RangedParams(NamedTuple):
 def ranged_trial(params: RangedParams, key: jax.Array, *, steps: int = 3, gain: float = 1.0) -> ToyResult:
     """``toy_trial`` with declared ranges: ``a > 0``, ``n`` in [1, 3], ``steps >= 1``."""
     return toy_trial(ToyParams(a=params.a, n=params.n), key, scale=gain)
+
+
+def picky_trial(params: ToyParams, key: jax.Array, *, size: int = 1) -> ToyResult:
+    """``toy_trial``, refusing a ``size`` above 2 while traced."""
+    if size > 2:
+        raise ValueError(f"size {size} is too large for this toy")  # PICKY_LINE
+    return toy_trial(params, key)

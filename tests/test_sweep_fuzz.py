@@ -59,7 +59,19 @@ def _damage(path, rng: random.Random) -> str:
     elif kind == "append":
         path.write_bytes(data + rng.choice([b"1,2,3\n", b"garbage", b"\n", b"{}"]))
     else:
-        old, new = rng.choice([(b"true", b"TRUE"), (b"false", b"0"), (b",1,", b",1.0,"), (b'"', b"'"), (b"e", b"E")])
+        old, new = rng.choice(
+            [
+                (b"true", b"TRUE"),
+                (b"false", b"0"),
+                (b",1,", b",1.0,"),
+                (b'"', b"'"),
+                (b"e", b"E"),
+                (b'"finished"', b'"finishEd"'),
+                (b'"runs": [', b'"runs": [1, '),
+                (b'"float32"', b'"float33"'),
+                (b'"columns"', b'"column"'),
+            ]
+        )
         path.write_bytes(data.replace(old, new, 1))
     return f"{kind} {path.name}"
 

@@ -8,6 +8,7 @@ import pytest
 from test_sweep import TESTS, _assert_one_line_error, _cli_command, _cli_env, _write
 
 from spikejax import cli
+from spikejax.sweep import read_results
 
 RANGED = """\
 [sweep]
@@ -170,3 +171,18 @@ def test_an_error_importing_the_trials_module_is_one_line_with_its_place(tmp_pat
     _assert_one_line_error(run.returncode, run.stderr, "[sweep] trial: ")
     assert expected.format(file=module) in run.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_later_static_value_the_trial_rejects_is_one_line(tmp_path, capsys):
+    """A static axis's second value is traced only when its chunks come: the trials before it are kept."""
+    path = _write(tmp_path, TOY.format(trial="picky_trial") + "size = [1, 3]\n")
+
+    rc = cli.main(["sweep", str(path), "--out", str(tmp_path / "out"), "--no-progress"])
+
+    err = capsys.readouterr().err
+    _assert_one_line_error(rc, err, "the trial _sweep_trials:picky_trial failed for size = 3 at ")
+    assert err.endswith(
+        f"{TESTS / '_sweep_trials.py'}:{_line_of('# PICKY_LINE')}: ValueError: size 3 is too large for this toy "
+        "(the trials done so far are kept)\n"
+    )
+    assert len(read_results(tmp_path / "out")["trial"]) == 2

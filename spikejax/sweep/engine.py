@@ -303,7 +303,16 @@ def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column
                     flush=True,
                 )
             began = time.perf_counter()
-            programs[signature] = batched.compile(*_chunk_inputs(spec, 0, 1, length))
+            try:
+                programs[signature] = batched.compile(*_chunk_inputs(spec, 0, 1, length))
+            except UserError:
+                raise
+            except Exception as err:  # noqa: BLE001 - a static axis's later value the trial rejects
+                shown_values = ", ".join(f"{name} = {value!r}" for name, value in signature)
+                raise UserError(
+                    f"the trial {spec.trial_path} failed for {shown_values or 'these values'} at {user_frame(err)}: "
+                    f"{type(err).__name__}: {first_line(err)} (the trials done so far are kept)"
+                ) from None
             store.add_compile_seconds(time.perf_counter() - began)
         return programs[signature]
 
@@ -311,7 +320,12 @@ def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column
         # One chunk in flight while the previous one is written: dispatch is asynchronous.
         pending = None
         for start, end in chunks:
-            outputs = program(start)(*_chunk_inputs(spec, start, end, length))
+            try:
+                outputs = program(start)(*_chunk_inputs(spec, start, end, length))
+            except BaseException:
+                if pending is not None:  # the chunk before is done: keep it
+                    _write_chunk(spec, store, bar, *pending)
+                raise
             if pending is not None:
                 _write_chunk(spec, store, bar, *pending)
             pending = (start, end, outputs)

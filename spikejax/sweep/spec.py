@@ -398,7 +398,7 @@ def _import_trial(trial_path: str) -> Callable[..., Any]:
         where = f"{err.filename}:{err.lineno}" if err.filename else f"line {err.lineno}"
         raise UserError(f"[sweep] trial: module '{module_name}' has a syntax error at {where}: {err.msg}") from None
     except ModuleNotFoundError as err:
-        if err.name is not None and module_name.startswith(err.name):
+        if err.name is not None and (module_name == err.name or module_name.startswith(err.name + ".")):
             raise UserError(f"[sweep] trial: cannot import module '{module_name}': {err}") from None
         raise UserError(f"[sweep] trial: importing module '{module_name}' failed at {user_frame(err)}: {err}") from None
     except Exception as err:  # noqa: BLE001 - whatever the user's module raises is theirs to fix
@@ -425,15 +425,15 @@ def first_line(err: BaseException) -> str:
 def user_frame(err: BaseException) -> str:
     """``file:line`` of the innermost frame of ``err``'s traceback that is the user's code.
 
-    The user's code is any file outside JAX, jaxlib, numpy, the sweep engine and
-    Python's own library; ``"an unknown place"`` if no frame is.
+    The user's code is any file outside JAX, jaxlib, numpy, spikejax and Python's
+    own library; ``"an unknown place"`` if no frame is.
     """
     import sysconfig
     import traceback
 
     import jax as jax_module
 
-    skipped = [str(Path(jax_module.__file__).parent), str(Path(np.__file__).parent), str(Path(__file__).parent)]
+    skipped = [str(Path(jax_module.__file__).parent), str(Path(np.__file__).parent), str(Path(__file__).parent.parent)]
     for name in ("jaxlib",):
         module = __import__("sys").modules.get(name)
         if module is not None and getattr(module, "__file__", None):

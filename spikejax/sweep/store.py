@@ -671,7 +671,7 @@ class Store:
         self.metadata["nan_trials"] = nan_trials
         self.metadata["nonfinite_trials"] = nonfinite
         self.run["finished"] = _now()
-        self.metadata["finished"] = self.metadata["finished"] or _now()
+        self.metadata["finished"] = self.metadata.get("finished") or _now()
         self.publish()
         return nan_trials, nonfinite
 
