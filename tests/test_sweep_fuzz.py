@@ -16,6 +16,7 @@ import pytest
 from test_sweep import TESTS, TOY, _run, _write
 
 from spikejax import cli
+from spikejax.sweep import read_results
 
 CASES = 60
 SEED = 13
@@ -93,6 +94,7 @@ def test_a_damaged_directory_resumes_exactly_or_fails_in_one_line(finished, tmp_
         assert (out / "results.csv").read_bytes() == reference, damages
         metadata = json.loads((out / "metadata.json").read_text())
         assert metadata["done_trials"] == metadata["total_trials"] == 36, damages
+        assert read_results(out)["trial"].tolist() == list(range(36)), damages
     else:
         assert rc == 2, damages
         errors = [line for line in err.splitlines() if not line.startswith("warning:")]

@@ -152,3 +152,18 @@ def test_the_engine_reads_its_own_numbers_back(finished):
 
     assert len(table["trial"]) == TOY_TRIALS
     np.testing.assert_array_equal(table["trial"], np.arange(TOY_TRIALS))
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda data: data[: data.rindex(b"\n", 0, -1) + 1], "holds 35 rows and {out}/metadata.json says 36 trials"),
+        (lambda data: data.replace(b"\n1,", b"\n0,", 1), "results.csv, line 3: the trials are not in order"),
+    ],
+)
+def test_a_table_cut_at_a_row_or_out_of_order_is_refused(finished, change, message):
+    _, out, reference = finished
+    (out / "results.csv").write_bytes(change(reference))
+
+    with pytest.raises(UserError, match=message.format(out=out).replace(".", r"\.")):
+        read_results(out)

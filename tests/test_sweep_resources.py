@@ -151,6 +151,18 @@ def test_an_output_path_that_cannot_be_written_is_refused(tmp_path, capsys):
         locked.chmod(0o700)
 
 
+def test_an_output_path_the_os_denies_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """Root may write anywhere: the OS's answer is simulated here, the message and the order are real."""
+    monkeypatch.setenv("SWEEP_TEST_FORBID", "1")
+    monkeypatch.setattr(os, "access", lambda path, mode: False)
+    path = _write(tmp_path, TOY.replace("toy_trial", "guarded_trial").replace("scale = 2.0\n", ""))
+
+    rc = cli.main(["sweep", str(path), "--out", str(tmp_path / "out" / "sub")])
+
+    _assert_one_line_error(rc, capsys.readouterr().err, f"cannot write in {tmp_path} (permission denied)")
+    assert not (tmp_path / "out").exists()
+
+
 def test_an_earlier_run_killed_before_its_first_write_is_a_usable_output(tmp_path):
     out = tmp_path / "out"
     (out / "parts").mkdir(parents=True)

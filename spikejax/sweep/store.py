@@ -722,7 +722,11 @@ def read_results(out_dir: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         bool; results as the trial returns them, floats as float32 or float64).
 
     Raises:
-        UserError: ``out_dir`` holds no sweep results.
+        UserError: ``out_dir`` holds no sweep results, or a table that is not as
+            the engine writes it: a cell of another form (``TRUE`` for ``true``),
+            a row with too few or too many cells, rows out of order, or, for a
+            finished sweep, another number of rows than it has trials (the message names the
+            file, and the line and column where there is one).
 
     Example:
         >>> table = read_results("out/gaits")                  # doctest: +SKIP
@@ -758,4 +762,15 @@ def read_results(out_dir: str | os.PathLike[str]) -> dict[str, np.ndarray]:
                 f"{path}, line {line}, column {column.name}: {text!r} is {bad_cell(text, column.dtype)} "
                 "(the table holds only what the engine writes)"
             ) from None
+    # A finished table has every row; one being written (or stopped by a full disk between its two
+    # files) holds the rows done so far, each checked above.
+    done = metadata.get("done_trials")
+    if done == metadata["total_trials"] and len(rows) != done:
+        raise UserError(
+            f"{path} holds {len(rows)} rows and {out / _METADATA} says {done} trials are done: "
+            "run the sweep again to rebuild the table from its parts"
+        )
+    if len(rows) > 1 and not np.all(np.diff(table["trial"]) > 0):
+        line = int(np.argmax(np.diff(table["trial"]) <= 0)) + 3
+        raise UserError(f"{path}, line {line}: the trials are not in order (the engine writes them in trial order)")
     return table
