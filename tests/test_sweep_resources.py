@@ -170,3 +170,14 @@ def test_an_earlier_run_killed_before_its_first_write_is_a_usable_output(tmp_pat
     path = _write(tmp_path, TOY)
 
     assert _run(path, out) == _run(path, tmp_path / "reference")
+
+
+def test_an_unusable_output_path_from_the_command_line_comes_before_the_trial(tmp_path):
+    """The real CLI: ``--out`` is checked before the trial's module is imported."""
+    out = _file(tmp_path)
+    path = _write(tmp_path, TOY.replace("_sweep_trials:toy_trial", "no_such_module_xyz:trial"))
+
+    run = subprocess.run(_cli_command(path, out), env=_cli_env(), capture_output=True, text=True)
+
+    _assert_one_line_error(run.returncode, run.stderr, f"--out {out} is a file, not a directory")
+    assert out.read_text() == "x"

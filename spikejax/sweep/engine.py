@@ -254,9 +254,14 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
         The path of ``results.csv``.
 
     Raises:
-        UserError: ``out_dir`` holds another sweep or other files, another run is
-            going on in it, or the trial does not return a NamedTuple or dict of
-            scalars. All are found before anything is compiled.
+        UserError: ``out_dir`` cannot be used (a file, below a file, not
+            writable, a non-empty directory of no sweep), holds another sweep,
+            another run is going on in it, the table would not fit on its disk,
+            the trial does not return a NamedTuple or dict of scalars, or raises
+            while traced (the message names the user's file and line). All are
+            found before anything is compiled. Later: the disk fills up (the
+            files stay whole; run again to resume), or a static value the trial
+            rejects when its chunks come.
     """
     out = Path(out_dir)
     metadata, missing = sweep_store.existing(out, spec)
