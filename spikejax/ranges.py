@@ -114,7 +114,8 @@ def check(
     """Raise a one-line ``UserError`` if a value lies outside its field's declared range, or is not finite.
 
     Args:
-        cls: the params NamedTuple whose ranges apply.
+        cls: the params NamedTuple (or the function, for its keyword-only
+            parameters) whose ranges apply.
         values: field -> a value or a sequence of values (a sweep's grid axis); fields
             without a declared range, and keys that are not fields, are not checked here.
         names: field -> how the user wrote it (``"--fov"``, ``"[grid] n_gaits"``); default

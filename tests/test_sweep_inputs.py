@@ -186,3 +186,13 @@ def test_a_later_static_value_the_trial_rejects_is_one_line(tmp_path, capsys):
         "(the trials done so far are kept)\n"
     )
     assert len(read_results(tmp_path / "out")["trial"]) == 2
+
+
+def test_ranges_are_declared_on_a_trial_functions_keywords():
+    from _sweep_trials import ranged_trial
+
+    from spikejax.ranges import Range, ranged, ranges_of
+
+    assert ranges_of(ranged_trial) == {"steps": Range(1, integer=True)}
+    with pytest.raises(TypeError, match="has no field nope to declare a range for"):
+        ranged(nope=Range(0))(ranged_trial)
