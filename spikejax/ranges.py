@@ -9,6 +9,10 @@ in (0, pi), a number of gaits in [1, 3]) says so where it is defined, by the
         tau: float = 20e-3
         n_gaits: int = 3
 
+A sweep's trial function declares the ranges of its keyword-only (static)
+parameters the same way, ``@ranged(max_epochs=Range(1, integer=True))`` on the
+function.
+
 Whoever takes values from a user (a sweep file, a flag) calls ``check`` before
 anything compiles: a value out of range, NaN or infinite is one ``UserError``
 naming the key or flag the user wrote. Inside ``jit`` nothing is checked (the
@@ -75,10 +79,17 @@ NON_NEGATIVE = Range(low=0)
 
 
 def ranged(**ranges: Range) -> Callable[[T], T]:
-    """Class decorator: declare the valid ranges of some fields of a params NamedTuple."""
+    """Decorator: declare the valid ranges of some fields of a params NamedTuple, or of
+    some keyword-only parameters of a function (a sweep's trial)."""
 
     def declare(cls: T) -> T:
-        fields = getattr(cls, "_fields", ())
+        if isinstance(cls, type):
+            fields = getattr(cls, "_fields", ())
+        else:
+            import inspect
+
+            kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+            fields = [p.name for p in inspect.signature(cls).parameters.values() if p.kind in kinds]
         unknown = sorted(set(ranges) - set(fields))
         if unknown:
             raise TypeError(f"{cls.__name__} has no field {', '.join(unknown)} to declare a range for")
@@ -103,7 +114,8 @@ def check(
     """Raise a one-line ``UserError`` if a value lies outside its field's declared range, or is not finite.
 
     Args:
-        cls: the params NamedTuple whose ranges apply.
+        cls: the params NamedTuple (or the function, for its keyword-only
+            parameters) whose ranges apply.
         values: field -> a value or a sequence of values (a sweep's grid axis); fields
             without a declared range, and keys that are not fields, are not checked here.
         names: field -> how the user wrote it (``"--fov"``, ``"[grid] n_gaits"``); default

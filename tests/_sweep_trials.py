@@ -9,6 +9,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax.ranges import POSITIVE, Range, ranged
+
 
 class ToyParams(NamedTuple):
     a: float = 1.0
@@ -105,3 +107,57 @@ def shaped_trial(params: ToyParams, key: jax.Array, *, size: int = 1, scale: flo
     draw = jnp.mean(jax.random.uniform(key, (size,)))
     value = toy_value(params.a, params.n, params.flag, params.offset, draw, scale)
     return ToyResult(value=value, count=params.n * 10 + size, draw=draw, positive=value > 0)
+
+
+def inf_trial(params: ToyParams, key: jax.Array) -> ToyResult:
+    """``value`` is +inf where ``a > 2``, -inf where ``a < -2``, NaN where ``a == 0``."""
+    result = toy_trial(params, key)
+    value = jnp.where(params.a > 2, jnp.inf, jnp.where(params.a < -2, -jnp.inf, result.value))
+    return result._replace(value=jnp.where(params.a == 0, jnp.nan, value))
+
+
+class FlagResult(NamedTuple):
+    count: jax.Array
+    ok: jax.Array
+    nonfinite: jax.Array
+
+
+def flag_trial(params: ToyParams, key: jax.Array) -> FlagResult:
+    """Int and bool results only; the state ``1 / a`` is infinite where ``a == 0``."""
+    from spikejax.sweep import nonfinite
+
+    state = {"inverse": 1.0 / params.a, "count": params.n}
+    return FlagResult(count=params.n * 10, ok=params.a > 0, nonfinite=nonfinite(state))
+
+
+def int_flag_trial(params: ToyParams, key: jax.Array) -> dict[str, jax.Array]:
+    return {"nonfinite": params.n}
+
+
+def raising_trial(params: ToyParams, key: jax.Array) -> ToyResult:
+    """Raises while traced, on the line below."""
+    raise ZeroDivisionError("the user's own mistake")  # RAISING_LINE
+
+
+def shape_error_trial(params: ToyParams, key: jax.Array) -> ToyResult:
+    result = toy_trial(params, key)
+    return result._replace(value=jnp.ones(3) + jnp.ones(4))  # SHAPE_LINE
+
+
+@ranged(a=POSITIVE, n=Range(1, 3, integer=True))
+class RangedParams(NamedTuple):
+    a: float = 1.0
+    n: int = 2
+
+
+@ranged(steps=Range(1, integer=True))
+def ranged_trial(params: RangedParams, key: jax.Array, *, steps: int = 3, gain: float = 1.0) -> ToyResult:
+    """``toy_trial`` with declared ranges: ``a > 0``, ``n`` in [1, 3], ``steps >= 1``."""
+    return toy_trial(ToyParams(a=params.a, n=params.n), key, scale=gain)
+
+
+def picky_trial(params: ToyParams, key: jax.Array, *, size: int = 1) -> ToyResult:
+    """``toy_trial``, refusing a ``size`` above 2 while traced."""
+    if size > 2:
+        raise ValueError(f"size {size} is too large for this toy")  # PICKY_LINE
+    return toy_trial(params, key)

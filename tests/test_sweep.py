@@ -436,8 +436,8 @@ def test_missing_file_is_one_line_error(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("change", "expected"),
     [
-        (lambda text: text.replace("n = [1, 2, 3]", "n = [1, 2]"), "[grid] differs"),
-        (lambda text: text.replace("offset = 0.5", "offset = 1.5"), "[fixed] differs"),
+        (lambda text: text.replace("n = [1, 2, 3]", "n = [1, 2]"), "[grid] n is [1, 2, 3] there, [1, 2] here"),
+        (lambda text: text.replace("offset = 0.5", "offset = 1.5"), "[fixed] offset is 0.5 there, 1.5 here"),
         (lambda text: text.replace("seeds = 3", "seeds = 4"), "[sweep] seeds is 3 there, 4 here"),
     ],
 )

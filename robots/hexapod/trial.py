@@ -9,10 +9,26 @@ import jax.numpy as jnp
 
 from robots.hexapod.gaits import N_GAITS
 from robots.hexapod.training import TrainParams, gait_correct, train
+from spikejax.ranges import NON_NEGATIVE, POSITIVE, Range, ranged
+from spikejax.sweep import nonfinite
 
 
+@ranged(
+    n_gaits=Range(1, N_GAITS, integer=True),
+    alpha=POSITIVE,
+    v_th=POSITIVE,
+    w_low=Range(),
+    w_high=Range(),
+    lr=NON_NEGATIVE,
+)
 class GaitTrialParams(NamedTuple):
-    """Traced parameters of a gait-convergence trial (see `TrainParams`)."""
+    """Traced parameters of a gait-convergence trial (see `TrainParams`).
+
+    Valid ranges (checked by the sweep engine before anything compiles):
+    ``n_gaits`` a whole number in [1, 3] (the gaits the robot has), the decay
+    factor ``alpha`` > 0 (Eq. (1)), the threshold ``v_th`` > 0 (Eq. (2)), the
+    update scale ``lr`` >= 0; all finite.
+    """
 
     n_gaits: int = 3
     alpha: float = 2.0
@@ -29,6 +45,9 @@ class GaitTrialResult(NamedTuple):
         converged: every trained gait reproduces its pattern from rest.
         g1_ok, g2_ok, g3_ok: each gait on its own (untrained gaits are usually wrong).
         epochs: training epochs run.
+        nonfinite: the trained weights, the training errors, the parameters or
+            the potentials' per-step factor ``1 / alpha`` are NaN or infinite
+            (`spikejax.sweep.nonfinite`; e.g. ``lr = 3e38``, ``alpha = 0``).
     """
 
     converged: jax.Array
@@ -36,8 +55,14 @@ class GaitTrialResult(NamedTuple):
     g2_ok: jax.Array
     g3_ok: jax.Array
     epochs: jax.Array
+    nonfinite: jax.Array
 
 
+@ranged(
+    train_cycles=Range(1, integer=True),
+    max_epochs=Range(1, integer=True),
+    eval_cycles=Range(1, integer=True),
+)
 def convergence_trial(
     params: GaitTrialParams,
     key: jax.Array,
@@ -58,6 +83,8 @@ def convergence_trial(
         g2_ok=ok[1],
         g3_ok=ok[2],
         epochs=result.epochs,
+        # The potentials are divided by alpha every step (Eq. (1)): 1 / alpha stands for them.
+        nonfinite=nonfinite((result, p, 1.0 / p.alpha)),
     )
 
 

@@ -13,11 +13,20 @@ from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.flight import FlightPlan, Recording, flight_plan, fly
 from robots.robobee.lqr import altitude_params, lateral_gain
 from robots.robobee.params import randomize, robobee_params
+from spikejax.ranges import NON_NEGATIVE, POSITIVE, Range, ranged
+from spikejax.sweep import nonfinite
 
 # A waypoint counts as reached within this distance (x, z) at the end of its segment.
 REACHED_M = 5e-3
 
 
+@ranged(
+    landing=Range(0, 1, integer=True),
+    mu=NON_NEGATIVE,
+    tau_reward=POSITIVE,
+    spread=Range(0, 1, high_open=True),
+    use_snn=Range(0, 1, integer=True),
+)
 class FlightTrialParams(NamedTuple):
     """Traced parameters of a flight trial.
 
@@ -28,6 +37,10 @@ class FlightTrialParams(NamedTuple):
         spread: robot randomisation: mass, drag and inertia each scaled by
             ``U(1 - spread, 1 + spread)``; the controllers keep the nominal model.
         use_snn: 1 for the SNN steering (learning online), 0 for the LQR teacher.
+
+    Valid ranges (checked by the sweep engine before anything compiles):
+    ``landing`` and ``use_snn`` 0 or 1, ``mu`` >= 0, ``tau_reward`` > 0,
+    ``spread`` in [0, 1) (a scale ``1 - spread`` stays positive); all finite.
     """
 
     landing: int = 0
@@ -51,6 +64,8 @@ class FlightTrialResult(NamedTuple):
         reached: both waypoints reached (within 5 mm) and upright throughout.
         touchdown_speed: |z_dot| when z first comes within 0.5 mm of the floor (the
             landing), m/s; 0 if never.
+        nonfinite: a value of the recording (state, targets, controls, weights)
+            went NaN or infinite (`spikejax.sweep.nonfinite`).
     """
 
     rms_error: jax.Array
@@ -62,6 +77,7 @@ class FlightTrialResult(NamedTuple):
     upright: jax.Array
     reached: jax.Array
     touchdown_speed: jax.Array
+    nonfinite: jax.Array
 
 
 @functools.cache
@@ -101,9 +117,19 @@ def summarize(rec: Recording, plan: FlightPlan, hold_steps: int, segment_steps: 
     first = jnp.argmax(on_ground)
     touchdown = jnp.where(jnp.any(on_ground), jnp.abs(rec.q[jnp.maximum(first - 1, 0), 5]), 0.0)
     reached = upright & (errors[0] < REACHED_M) & (errors[1] < REACHED_M)
-    return FlightTrialResult(rms, errors[0], errors[1], settles[0], settles[1], max_theta, upright, reached, touchdown)
+    return FlightTrialResult(
+        rms, errors[0], errors[1], settles[0], settles[1], max_theta, upright, reached, touchdown, nonfinite(rec)
+    )
 
 
+@ranged(
+    hold_steps=Range(1, integer=True),
+    segment_steps=Range(1, integer=True),
+    record_every=Range(1, integer=True),
+    n_per_input=Range(1, integer=True),
+    n_hidden=Range(1, integer=True),
+    n_output=Range(1, integer=True),
+)
 def flight_trial(
     params: FlightTrialParams,
     key: jax.Array,

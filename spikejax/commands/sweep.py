@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from spikejax.commands import Command, count
 from spikejax.devices import cpu_devices_for_run
 from spikejax.sweep import load_sweep, run_sweep
+from spikejax.sweep.store import check_out
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,6 +56,7 @@ def run(
     """
     if cpu_devices:
         cpu_devices_for_run(cpu_devices)
+    check_out(Path(out))  # before the trial's module is even imported
     spec = load_sweep(file, seeds=seeds, chunk_size=chunk_size)
     results = run_sweep(spec, out, progress=not no_progress)
     print(results)

@@ -40,7 +40,12 @@ value, the same in every trial) or a keyword-only parameter of the function
 (passed as a static Python value, which may shape the program). The other fields
 take their defaults. Fields are passed as int32, float32 or bool arrays: by their
 annotation where it is ``int``, ``float`` or ``bool``, else by the type of the
-value. The function returns a NamedTuple (or a dict) of scalars.
+value. The function returns a NamedTuple (or a dict) of scalars. A bool result named
+``nonfinite`` (`nonfinite` of the trial's state) flags a trial whose state went
+NaN or infinite; the engine lists those trials at the end, with those whose
+float results are NaN or infinite. Valid ranges of the params fields and of the
+keyword-only parameters are declared with `spikejax.ranges.ranged` (on the
+NamedTuple and on the function) and checked before anything is traced.
 
 Rows and keys. Trials are numbered ``trial = point * seeds + seed``: ``point``
 counts the grid points in the order of ``itertools.product`` over the axes in
@@ -69,7 +74,7 @@ The package, one concern a module (each documents its own rules):
   ``metadata.json``, the rules of resuming (`read_results`).
 """
 
-from spikejax.sweep.engine import run_sweep, trial_key
+from spikejax.sweep.engine import nonfinite, run_sweep, trial_key
 from spikejax.sweep.spec import Axis, SweepSpec, load_sweep
 from spikejax.sweep.store import read_results
 
@@ -77,6 +82,7 @@ __all__ = [
     "Axis",
     "SweepSpec",
     "load_sweep",
+    "nonfinite",
     "read_results",
     "run_sweep",
     "trial_key",

@@ -14,6 +14,17 @@ asynchronous.
 
 A trial's key is `trial_key` of its seed alone (see `spikejax.sweep`), so no
 trial depends on the chunk size or on the other trials of its batch.
+
+Non-finite values. A trial whose state can go non-finite while its results
+stay finite (a bool "converged", an int count) says so with a bool result named
+``nonfinite``, `nonfinite` of its final state. At the end of a sweep the engine
+lists, on stderr and in ``metadata.json`` (``nonfinite_trials``), the trials with
+a NaN or infinite float result or that flag set (``nan_trials``: those with a NaN
+result).
+
+Errors. An exception the trial raises while it is traced (once, before
+anything is compiled) is one line with the file and line of the user's code
+that raised it.
 """
 
 from __future__ import annotations
@@ -35,10 +46,10 @@ from tqdm import tqdm
 from spikejax.devices import BatchSplit, shard_batch
 from spikejax.errors import UserError
 from spikejax.sweep import store as sweep_store
-from spikejax.sweep.spec import SweepSpec
-from spikejax.sweep.table import Column, cells, key_columns, result_dtype
+from spikejax.sweep.spec import SweepSpec, first_line, user_frame
+from spikejax.sweep.table import NONFINITE, Column, cells, key_columns, result_dtype
 
-__all__ = ["run_sweep", "trial_key"]
+__all__ = ["nonfinite", "run_sweep", "trial_key"]
 
 _NAN_TRIALS_LISTED = 20
 
@@ -57,6 +68,25 @@ def trial_key(base_seed: int, seed: int | jax.Array) -> jax.Array:
         >>> u = jax.random.uniform(trial_key(0, 3))  # the draw of seed 3, anywhere
     """
     return jax.random.fold_in(jax.random.key(base_seed), seed)
+
+
+def nonfinite(tree: Any) -> jax.Array:
+    """Whether any floating-point value of ``tree`` (a pytree of arrays) is NaN or infinite.
+
+    A trial returns it as its bool result ``nonfinite`` (of its final state, say)
+    and the engine reports the trials where it is true, whatever the other
+    results' dtypes.
+
+    Example:
+        >>> nonfinite({"w": jnp.array([1.0, jnp.inf]), "n": jnp.array(3)})
+        Array(True, dtype=bool)
+    """
+    flags = [
+        ~jnp.all(jnp.isfinite(leaf))
+        for leaf in jax.tree.leaves(tree)
+        if jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)
+    ]
+    return jnp.any(jnp.stack(flags)) if flags else jnp.asarray(False)
 
 
 def _as_result_dict(result: Any, trial_path: str) -> dict[str, Any]:
@@ -100,10 +130,17 @@ def _result_columns(spec: SweepSpec) -> list[Column]:
 
     try:
         shapes = jax.eval_shape(probe, _example_params(spec), jax.random.key(0))
+    except UserError:
+        raise
     except (ValueError, TypeError) as err:
         # A trial that validates its own arguments (a bad [fixed] choice, say) says why here.
-        message = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise UserError(f"the trial {spec.trial_path} rejects the sweep's values: {message}") from None
+        raise UserError(
+            f"the trial {spec.trial_path} rejects the sweep's values: {first_line(err)} (at {user_frame(err)})"
+        ) from None
+    except Exception as err:  # noqa: BLE001 - whatever the user's trial raises is theirs to fix
+        raise UserError(
+            f"the trial {spec.trial_path} raised {type(err).__name__} at {user_frame(err)}: {first_line(err)}"
+        ) from None
     taken = {column.name for column in key_columns(spec)}
     columns = []
     for name in names:
@@ -118,6 +155,11 @@ def _result_columns(spec: SweepSpec) -> list[Column]:
                 f"{getattr(shape, 'shape', type(shape).__name__)}"
             )
         columns.append(Column(name, result_dtype(shape.dtype, name, spec.trial_path)))
+        if name == NONFINITE and columns[-1].dtype != "bool":
+            raise UserError(
+                f"result '{NONFINITE}' of the trial {spec.trial_path} must be a bool "
+                f"(spikejax.sweep.nonfinite of its state), got {shape.dtype}"
+            )
         taken.add(name)
     if not columns:
         raise UserError(f"the trial {spec.trial_path} returns no results")
@@ -212,9 +254,14 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
         The path of ``results.csv``.
 
     Raises:
-        UserError: ``out_dir`` holds another sweep or other files, another run is
-            going on in it, or the trial does not return a NamedTuple or dict of
-            scalars. All are found before anything is compiled.
+        UserError: ``out_dir`` cannot be used (a file, below a file, not
+            writable, a non-empty directory of no sweep), holds another sweep,
+            another run is going on in it, the table would not fit on its disk,
+            the trial does not return a NamedTuple or dict of scalars, or raises
+            while traced (the message names the user's file and line). All are
+            found before anything is compiled. Later: the disk fills up (the
+            files stay whole; run again to resume), or a static value the trial
+            rejects when its chunks come.
     """
     out = Path(out_dir)
     metadata, missing = sweep_store.existing(out, spec)
@@ -224,13 +271,15 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
         columns = key_columns(spec) + _result_columns(spec)
         sweep_store.check_columns(out, metadata, columns)
     first_result = len(key_columns(spec))
+    if missing:
+        sweep_store.check_space(out, spec, columns)
     with sweep_store.opened(out, spec, metadata, columns, spec.chunk_size) as store:
         try:
             _run_missing(spec, store, columns[first_result:], progress)
         finally:
             store.publish()
         if store.done == spec.n_trials:
-            _finish(spec, store, first_result)
+            _finish(spec, store, columns, first_result)
     return sweep_store.results_path(out)
 
 
@@ -259,7 +308,16 @@ def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column
                     flush=True,
                 )
             began = time.perf_counter()
-            programs[signature] = batched.compile(*_chunk_inputs(spec, 0, 1, length))
+            try:
+                programs[signature] = batched.compile(*_chunk_inputs(spec, 0, 1, length))
+            except UserError:
+                raise
+            except Exception as err:  # noqa: BLE001 - a static axis's later value the trial rejects
+                shown_values = ", ".join(f"{name} = {value!r}" for name, value in signature)
+                raise UserError(
+                    f"the trial {spec.trial_path} failed for {shown_values or 'these values'} at {user_frame(err)}: "
+                    f"{type(err).__name__}: {first_line(err)} (the trials done so far are kept)"
+                ) from None
             store.add_compile_seconds(time.perf_counter() - began)
         return programs[signature]
 
@@ -267,7 +325,12 @@ def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column
         # One chunk in flight while the previous one is written: dispatch is asynchronous.
         pending = None
         for start, end in chunks:
-            outputs = program(start)(*_chunk_inputs(spec, start, end, length))
+            try:
+                outputs = program(start)(*_chunk_inputs(spec, start, end, length))
+            except BaseException:
+                if pending is not None:  # the chunk before is done: keep it
+                    _write_chunk(spec, store, bar, *pending)
+                raise
             if pending is not None:
                 _write_chunk(spec, store, bar, *pending)
             pending = (start, end, outputs)
@@ -283,13 +346,13 @@ def _write_chunk(
     bar.update(end - start)
 
 
-def _finish(spec: SweepSpec, store: sweep_store.Store, first_result: int) -> None:
-    nan_trials = store.finish(first_result)
-    if nan_trials:
-        listed = ", ".join(str(trial) for trial in nan_trials[:_NAN_TRIALS_LISTED])
-        more = f", ... ({len(nan_trials) - _NAN_TRIALS_LISTED} more)" if len(nan_trials) > _NAN_TRIALS_LISTED else ""
+def _finish(spec: SweepSpec, store: sweep_store.Store, columns: list[Column], first_result: int) -> None:
+    _, trials = store.finish(columns, first_result)
+    if trials:
+        listed = ", ".join(str(trial) for trial in trials[:_NAN_TRIALS_LISTED])
+        more = f", ... ({len(trials) - _NAN_TRIALS_LISTED} more)" if len(trials) > _NAN_TRIALS_LISTED else ""
         print(
-            f"warning: sweep '{spec.name}': NaN results in {len(nan_trials)} of {spec.n_trials} trials: "
-            f"{listed}{more} (all in {store.metadata_path}, nan_trials)",
+            f"warning: sweep '{spec.name}': non-finite values (NaN or inf) in {len(trials)} of {spec.n_trials} "
+            f"trials: {listed}{more} (all in {store.metadata_path}, nonfinite_trials)",
             file=sys.stderr,
         )

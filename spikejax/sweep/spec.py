@@ -120,25 +120,52 @@ class SweepSpec:
     def canonical(self) -> dict[str, Any]:
         """What defines the trials: ``[sweep]`` (chunk size left out), ``[fixed]``, ``[grid]``.
 
-        The form is the one JSON gives back, so that it compares equal to the copy
-        in ``metadata.json``.
+        A params field's values are written as the trial receives them (``2`` of a
+        float field as ``2.0``), so that equivalent sweep files are one sweep. The
+        form is the one JSON gives back, so that it compares equal to the copy in
+        ``metadata.json``.
         """
-        canonical = {
-            "sweep": {
-                "name": self.name,
-                "trial": self.trial_path,
-                "seeds": self.seeds,
-                "base_seed": self.base_seed,
-            },
-            "fixed": dict(self.document.get("fixed", {})),
-            "grid": [[axis.name, list(axis.values)] for axis in self.axes],
+        fixed = {
+            key: _normalised(value, _ARRAY_KINDS.get(self.traced[key].dtype) if key in self.traced else None)
+            for key, value in self.document.get("fixed", {}).items()
         }
-        return json.loads(_canonical_json(canonical))
+        grid = [
+            [axis.name, [_normalised(v, None if axis.static else axis.kind) for v in axis.values]] for axis in self.axes
+        ]
+        return json.loads(_canonical_json(self._canonical(fixed, grid)))
 
     @property
     def fingerprint(self) -> str:
         """SHA-256 of `canonical`: equal fingerprints, equal trials."""
         return hashlib.sha256(_canonical_json(self.canonical).encode()).hexdigest()
+
+    @property
+    def legacy_fingerprint(self) -> str:
+        """The fingerprint as earlier versions computed it, of the values as the file writes them.
+
+        An output directory that records it is this sweep too (it differs from
+        `fingerprint` only where an int is given for a float field).
+        """
+        fixed = dict(self.document.get("fixed", {}))
+        grid = [[axis.name, list(axis.values)] for axis in self.axes]
+        return hashlib.sha256(_canonical_json(self._canonical(fixed, grid)).encode()).hexdigest()
+
+    def _canonical(self, fixed: dict[str, Any], grid: list[Any]) -> dict[str, Any]:
+        sweep = {"name": self.name, "trial": self.trial_path, "seeds": self.seeds, "base_seed": self.base_seed}
+        return json.loads(_canonical_json({"sweep": sweep, "fixed": fixed, "grid": grid}))
+
+
+_ARRAY_KINDS = {
+    dtype: kind
+    for kind, dtype in {"bool": np.dtype(np.bool_), "int": np.dtype(np.int32), "float": np.dtype(np.float32)}.items()
+}
+
+
+def _normalised(value: Any, kind: str | None) -> Any:
+    """``value`` as the Python value of ``kind`` (None: as it is)."""
+    if kind == "float" and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
 
 
 def _canonical_json(value: Any) -> str:
@@ -244,6 +271,7 @@ def _build_spec(
     for name_, parameter in keyword_only.items():
         if parameter.default is inspect.Parameter.empty and name_ not in static:
             raise UserError(f"the trial {trial_path} needs the keyword-only argument '{name_}': set it in [fixed]")
+    _check_ranges(trial, trial_path, params_type, axes, fixed, static)
     return SweepSpec(
         path=path,
         text=text,
@@ -259,6 +287,56 @@ def _build_spec(
         traced=traced,
         static=static,
     )
+
+
+def _check_ranges(
+    trial: Callable[..., Any],
+    trial_path: str,
+    params_type: type,
+    axes: tuple[Axis, ...],
+    fixed: Mapping[str, Any],
+    static: Mapping[str, Any],
+) -> None:
+    """The values of ``[fixed]`` and ``[grid]`` against the declared ranges and the keywords' annotations.
+
+    Ranges are declared with `spikejax.ranges.ranged` on the params NamedTuple (traced
+    fields) and on the trial function (its keyword-only parameters).
+    """
+    from spikejax import ranges
+
+    traced_values = {axis.name: list(axis.values) for axis in axes if not axis.static}
+    traced_values.update({key: value for key, value in fixed.items() if key in params_type._fields})
+    names = {
+        key: f"[grid] {key}" if key in traced_values and any(a.name == key for a in axes) else f"[fixed] {key}"
+        for key in traced_values
+    }
+    ranges.check(params_type, traced_values, names=names)
+    static_values = {axis.name: list(axis.values) for axis in axes if axis.static}
+    static_values.update({key: [value] for key, value in static.items()})
+    names = {key: f"[grid] {key}" if any(a.name == key for a in axes) else f"[fixed] {key}" for key in static_values}
+    try:
+        hints = typing.get_type_hints(trial)
+    except Exception:  # noqa: BLE001 - checked by _trial_signature already
+        hints = {}
+    wanted = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
+    for key, values in static_values.items():
+        kind = hints.get(key)
+        if kind not in wanted:
+            continue
+        for value in values:
+            fits = isinstance(value, kind) and (kind is bool or not isinstance(value, bool))
+            if kind is float and isinstance(value, int) and not isinstance(value, bool):
+                fits = True
+            if not fits:
+                raise UserError(
+                    f"{names[key]} must be {wanted[kind]} (the trial's keyword '{key}: {kind.__name__}'), got {value!r}"
+                )
+    numeric = {
+        key: values
+        for key, values in static_values.items()
+        if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+    }
+    ranges.check(trial, numeric, names=names)
 
 
 def _check_sections(document: dict[str, Any]) -> None:
@@ -316,8 +394,18 @@ def _import_trial(trial_path: str) -> Callable[..., Any]:
     module_name, _, attributes = trial_path.partition(":")
     try:
         target: Any = importlib.import_module(module_name)
-    except ImportError as err:
-        raise UserError(f"[sweep] trial: cannot import module '{module_name}': {err}") from None
+    except SyntaxError as err:
+        where = f"{err.filename}:{err.lineno}" if err.filename else f"line {err.lineno}"
+        raise UserError(f"[sweep] trial: module '{module_name}' has a syntax error at {where}: {err.msg}") from None
+    except ModuleNotFoundError as err:
+        if err.name is not None and (module_name == err.name or module_name.startswith(err.name + ".")):
+            raise UserError(f"[sweep] trial: cannot import module '{module_name}': {err}") from None
+        raise UserError(f"[sweep] trial: importing module '{module_name}' failed at {user_frame(err)}: {err}") from None
+    except Exception as err:  # noqa: BLE001 - whatever the user's module raises is theirs to fix
+        raise UserError(
+            f"[sweep] trial: importing module '{module_name}' failed at {user_frame(err)}: "
+            f"{type(err).__name__}: {first_line(err)}"
+        ) from None
     for attribute in attributes.split("."):
         try:
             target = getattr(target, attribute)
@@ -326,6 +414,41 @@ def _import_trial(trial_path: str) -> Callable[..., Any]:
     if not callable(target):
         raise UserError(f"[sweep] trial: {trial_path} is not a function")
     return target
+
+
+def first_line(err: BaseException) -> str:
+    """The first line of an exception's message (its type's name if it has none)."""
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
+
+
+def user_frame(err: BaseException) -> str:
+    """``file:line`` of the innermost frame of ``err``'s traceback that is the user's code.
+
+    The user's code is any file outside JAX, jaxlib, numpy, spikejax and Python's
+    own library; ``"an unknown place"`` if no frame is.
+    """
+    import sysconfig
+    import traceback
+
+    import jax as jax_module
+
+    skipped = [str(Path(jax_module.__file__).parent), str(Path(np.__file__).parent), str(Path(__file__).parent.parent)]
+    for name in ("jaxlib",):
+        module = __import__("sys").modules.get(name)
+        if module is not None and getattr(module, "__file__", None):
+            skipped.append(str(Path(module.__file__).parent))
+    skipped.append(sysconfig.get_paths()["stdlib"])
+    frames = traceback.extract_tb(err.__traceback__)
+    for frame in reversed(frames):
+        name = frame.filename
+        installed = "site-packages" in Path(name).parts or "dist-packages" in Path(name).parts
+        if name.startswith("<") or any(
+            name.startswith(prefix + os.sep) and (installed is False or prefix != skipped[-1]) for prefix in skipped
+        ):
+            continue
+        return f"{name}:{frame.lineno}"
+    return "an unknown place"
 
 
 def _trial_signature(trial: Callable[..., Any], trial_path: str) -> tuple[type, dict[str, inspect.Parameter], bool]:

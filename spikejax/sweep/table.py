@@ -15,6 +15,7 @@ is `spikejax.sweep.store`'s.
 
 from __future__ import annotations
 
+import re
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -23,12 +24,21 @@ import numpy as np
 from spikejax.errors import UserError
 from spikejax.sweep.spec import SweepSpec
 
-__all__ = ["Column", "NAN", "cells", "key_columns", "parse_column", "result_dtype"]
+__all__ = ["Column", "NAN", "NONFINITE", "bad_cell", "cells", "key_columns", "parse_column", "result_dtype"]
 
 # Grid values are written as the file gives them, so the table keeps Python's precision.
 _AXIS_TABLE_DTYPES = {"bool": "bool", "int": "int64", "float": "float64"}
 # The text of a NaN cell, float32 (numpy's str) and float64 (repr) alike.
 NAN = "nan"
+# The documented name of a bool result that says the trial's state went non-finite
+# (`spikejax.sweep.nonfinite`); the engine reports the trials where it is true.
+NONFINITE = "nonfinite"
+# The texts the engine writes, and nothing else, read back: decimal integers; Python's
+# repr of a float and numpy's str of a float32 (digits with a point and/or an exponent,
+# nan, inf, -inf).
+_INT_CELL = re.compile(r"-?(0|[1-9][0-9]*)")
+_FLOAT_CELL = re.compile(r"-?([0-9]+\.[0-9]+(e[+-][0-9]+)?|[0-9]+e[+-][0-9]+|inf)|nan")
+_BOOL_CELLS = ("true", "false")
 
 
 class Column(NamedTuple):
@@ -89,8 +99,31 @@ def cells(spec: SweepSpec, start: int, end: int, results: list[np.ndarray]) -> l
     return columns
 
 
+def bad_cell(text: str, dtype: str) -> str | None:
+    """Why ``text`` is not a cell the engine writes for a column of ``dtype`` (None: it is one)."""
+    if dtype == "bool":
+        return None if text in _BOOL_CELLS else "not true or false"
+    if np.issubdtype(np.dtype(dtype), np.integer):
+        if not _INT_CELL.fullmatch(text):
+            return "not an integer"
+        info = np.iinfo(np.dtype(dtype))
+        return None if info.min <= int(text) <= info.max else f"out of the range of {dtype}"
+    return None if _FLOAT_CELL.fullmatch(text) else "not a number"
+
+
 def parse_column(texts: tuple[str, ...], dtype: str) -> np.ndarray:
-    """The values of a column's cells, as an array of ``dtype``."""
+    """The values of a column's cells, as an array of ``dtype``.
+
+    Only the texts the engine writes are read (see the module docstring); check
+    them with `bad_cell` first, which says where a table is damaged.
+
+    Raises:
+        UserError: a cell is not one the engine writes for ``dtype``.
+    """
+    for text in set(texts):
+        reason = bad_cell(text, dtype)
+        if reason is not None:
+            raise UserError(f"cell {text!r} is {reason} ({dtype} column)")
     if dtype == "bool":
         return np.asarray([text == "true" for text in texts], dtype=np.bool_)
     return np.asarray(texts, dtype=str).astype(dtype) if texts else np.zeros(0, dtype)
