@@ -9,6 +9,10 @@ in (0, pi), a number of gaits in [1, 3]) says so where it is defined, by the
         tau: float = 20e-3
         n_gaits: int = 3
 
+A parameter of a function (a keyword argument that becomes a traced value
+later, such as the field of view of `spikejax.vision.pipe.track_params`) is
+declared the same way, on the function.
+
 Whoever takes values from a user (a sweep file, a flag) calls ``check`` before
 anything compiles: a value out of range, NaN or infinite is one ``UserError``
 naming the key or flag the user wrote. Inside ``jit`` nothing is checked (the
@@ -18,6 +22,7 @@ values are tracers there); the edge is where they enter.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
@@ -28,7 +33,7 @@ from spikejax.errors import UserError
 
 __all__ = ["NON_NEGATIVE", "POSITIVE", "Range", "check", "ranged", "ranges_of"]
 
-T = TypeVar("T", bound=type)
+T = TypeVar("T")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,10 +80,12 @@ NON_NEGATIVE = Range(low=0)
 
 
 def ranged(**ranges: Range) -> Callable[[T], T]:
-    """Class decorator: declare the valid ranges of some fields of a params NamedTuple."""
+    """Decorator: declare the valid ranges of some fields of a params NamedTuple, or parameters of a function."""
 
     def declare(cls: T) -> T:
-        fields = getattr(cls, "_fields", ())
+        fields = getattr(cls, "_fields", None)
+        if fields is None:
+            fields = tuple(inspect.signature(cls).parameters) if callable(cls) else ()
         unknown = sorted(set(ranges) - set(fields))
         if unknown:
             raise TypeError(f"{cls.__name__} has no field {', '.join(unknown)} to declare a range for")
