@@ -337,8 +337,7 @@ def detect(
         first, parts = start * det.sub_slots, chunk * det.sub_slots
         ends = (np.arange(first, first + parts) + 1) * part
         lo, hi = np.searchsorted(index, [first, first + parts])
-        if lo == hi and _at_rest(det, state):
-            # No events and every potential 0: the slots detect nothing and the grids stay at 0.
+        if lo == hi and _can_skip(det, state):
             state = _rested(det, state, ends[(stop - start) * det.sub_slots - 1])
             bodies.append(_nothing(pp.BODY, ends, det.sub_slots, stop - start))
             entries.append(_nothing(pp.ENTRY, ends, det.sub_slots, stop - start))
@@ -364,8 +363,13 @@ def detect(
     return Detections(bodies, entries, est_body, est_entry, np.concatenate(overflow), t0)
 
 
-def _at_rest(det: Detector, state: DetectorState) -> bool:
-    return all(bool(jnp.all(s.v == 0)) for s in state if s is not None)
+def _can_skip(det: Detector, state: DetectorState) -> bool:
+    """Whether slots without events can be left uncomputed: they detect nothing, and the state after them is known.
+
+    Asynchronously an empty slot updates no neuron; synchronously every neuron
+    decays, which changes nothing once every potential is 0.
+    """
+    return det.mode == "async" or all(bool(jnp.all(s.v == 0)) for s in state if s is not None)
 
 
 def _rested(det: Detector, state: DetectorState, end: float) -> DetectorState:
