@@ -144,7 +144,7 @@ def test_skipping_empty_stretches_gives_the_result_of_computing_them(mode, monke
     run = detect_module._run_jit
     monkeypatch.setattr(detect_module, "_run_jit", lambda *a: calls.append(1) or run(*a))
     skipped = detect(events, (16, 16), **kw)
-    assert (n_skipped := len(calls)) < 6  # of 13 chunks of 4 slots, the empty ones at rest are not computed
+    assert (n_skipped := len(calls)) < 6  # of 13 chunks of 4 slots, the empty ones (at rest) are not computed
     monkeypatch.setattr(detect_module, "_can_skip", lambda det, state: False)  # compute every slot
     computed = detect(events, (16, 16), **kw)
     assert len(calls) == n_skipped + 13
@@ -172,6 +172,17 @@ def test_spans_and_sensors_beyond_memory_are_refused_with_the_size():
     ):
         detect(events, (16, 16), circles=False)
     with pytest.raises(
-        UserError, match=r"^the Hough grids of a 100000x100000 sensor \(\d+ cells\) would need [\d.]+ TB"
+        UserError, match=r"^the Hough grids of a 100000x100000 sensor would need [\d.]+ TB of memory, more than"
     ):
         detect(events[:1], (100_000, 100_000))
+
+
+def test_a_file_of_the_other_numpy_format_is_named(tmp_path):
+    a = _events(3)
+    np.save(tmp_path / "r.npy", a)
+    (tmp_path / "r.npz").write_bytes((tmp_path / "r.npy").read_bytes())
+    with pytest.raises(UserError) as err:
+        io.read(tmp_path / "r.npz")
+    assert str(err.value) == (
+        f"{tmp_path / 'r.npz'}: not an .npz file (a zip archive of arrays); it is an .npy file (a NumPy array), named .npz"
+    )

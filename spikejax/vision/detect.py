@@ -315,8 +315,10 @@ def detect(
         sub_slots=sub_slots,
     )
     cells = sum(g.size for g in (det.line, det.circle) if g is not None)
-    # Per cell: potential and time (float32), a slot's spikes (int8 per part), its counts and votes.
-    io.check_fits(cells * (24 + sub_slots), f"the Hough grids of a {width}x{height} sensor ({cells} cells)")
+    # Per cell: potential and time (float32), a slot's spikes (int8 per part), its counts and votes;
+    # the line grid's table of the cell of every pixel at every angle, built in float64 (`hough.line_table`).
+    table = 0 if det.line is None else width * height * det.line.n_theta
+    io.check_fits(cells * (24 + sub_slots) + table * 32, f"the Hough grids of a {width}x{height} sensor")
     params = detector_params(v_th=0.5 * height) if params is None else params
     track = pp.track_params(width=width) if track is None else track
     part = slot / det.sub_slots
@@ -332,18 +334,24 @@ def detect(
     state = _init(det)
     bodies, entries, overflow = [], [], []
     bar = _progress(n_slots, progress)
-    for start in range(0, n_slots, chunk):
+    start = 0
+    while start < n_slots:
         stop = min(start + chunk, n_slots)
         first, parts = start * det.sub_slots, chunk * det.sub_slots
-        ends = (np.arange(first, first + parts) + 1) * part
         lo, hi = np.searchsorted(index, [first, first + parts])
         if lo == hi and _can_skip(det, state):
-            state = _rested(det, state, ends[(stop - start) * det.sub_slots - 1])
-            bodies.append(_nothing(pp.BODY, ends, det.sub_slots, stop - start))
-            entries.append(_nothing(pp.ENTRY, ends, det.sub_slots, stop - start))
+            # Up to the chunk of the next event, nothing is computed (see `_can_skip`).
+            later = n_slots if lo == len(index) else int(index[lo]) // det.sub_slots // chunk * chunk
+            stop = min(max(later, stop), n_slots)
+            slot_ends = (np.arange(start, stop) * det.sub_slots + det.sub_slots) * part
+            state = _rested(det, state, slot_ends[-1])
+            bodies.append(_nothing(pp.BODY, slot_ends))
+            entries.append(_nothing(pp.ENTRY, slot_ends))
             overflow.append(np.zeros(stop - start, np.int64))
             bar.update(stop - start)
+            start = stop
             continue
+        ends = (np.arange(first, first + parts) + 1) * part
         ev, over = io.slot_grid(events[lo:hi], index[lo:hi], capacity, parts, t0=t0, first=first)
         ev = jax.tree.map(lambda v: v.reshape(chunk, det.sub_slots, -1), ev)
         ts = ends.reshape(chunk, det.sub_slots)
@@ -355,6 +363,7 @@ def detect(
         entries.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], e))
         overflow.append(over.reshape(chunk, det.sub_slots).sum(axis=1)[: stop - start])
         bar.update(stop - start)
+        start = stop
     bar.close()
     cat = lambda parts_: jax.tree.map(lambda *v: np.concatenate(v), *parts_)
     bodies, entries = cat(bodies), cat(entries)
@@ -380,10 +389,13 @@ def _rested(det: Detector, state: DetectorState, end: float) -> DetectorState:
     return DetectorState(*(None if s is None else hough.HoughState(s.v, jnp.full_like(s.t, t)) for s in state))
 
 
-def _nothing(kind: int, ends: np.ndarray, sub_slots: int, n: int) -> pp.Pipe:
+def _nothing(kind: int, slot_ends: np.ndarray) -> pp.Pipe:
+    """What slots without a detection hold: their time stamps (the end of each), the kind, ``valid`` False."""
+    n = len(slot_ends)
     zeros = np.zeros(n, np.float32)
-    t = ends.reshape(-1, sub_slots)[:n, -1].astype(np.float32)
-    return pp.Pipe(t, zeros, zeros, zeros, zeros, np.full(n, kind, np.int32), zeros, np.zeros(n, bool))
+    return pp.Pipe(
+        slot_ends.astype(np.float32), zeros, zeros, zeros, zeros, np.full(n, kind, np.int32), zeros, np.zeros(n, bool)
+    )
 
 
 def _pad(v: np.ndarray, n: int, edge: bool = False) -> np.ndarray:

@@ -404,7 +404,9 @@ def _check_magic(path: Path, suffix: str) -> None:
     if not head:
         raise UserError(f"{path}: empty file, not {_WHAT[suffix]}")
     if not any(head.startswith(m) for m in _MAGIC[suffix]):
-        raise UserError(f"{path}: not {_WHAT[suffix]}; its first bytes are {head[:8]!r}")
+        other = [s for s, magic in _MAGIC.items() if any(head.startswith(m) for m in magic)]
+        found = f"it is {_WHAT[other[0]]}, named {suffix}" if other else f"its first bytes are {head[:8]!r}"
+        raise UserError(f"{path}: not {_WHAT[suffix]}; {found}")
 
 
 def _stated_size(value) -> tuple[int, int]:
