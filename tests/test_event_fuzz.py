@@ -10,7 +10,11 @@ one error line, never a traceback.
 """
 
 import io as pyio
+import subprocess
+import sys
+import tempfile
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -51,15 +55,22 @@ def _npy_bytes(array: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def _aedat4_bytes(a: np.ndarray) -> bytes:
+    with tempfile.TemporaryDirectory() as tmp:
+        return io.save(Path(tmp) / "r.aedat4", a, (128, 128)).read_bytes()
+
+
 def _damage(rng: np.random.Generator, a: np.ndarray) -> tuple[str, str, bytes]:
     """One damaged file: ``(what was done, suffix, bytes)``."""
     kind = rng.choice(["truncate", "flip", "dtype", "times", "nan", "huge", "size", "suffix"])
     cols = _columns(a)
     n = len(a)
     if kind == "truncate":
-        data = _npz_bytes(cols) if rng.random() < 0.6 else _npy_bytes(a)
+        suffix = str(rng.choice([".npz", ".npy", ".aedat4"]))
+        data = {".npz": lambda: _npz_bytes(cols), ".npy": lambda: _npy_bytes(a), ".aedat4": lambda: _aedat4_bytes(a)}
+        data = data[suffix]()
         cut = int(rng.integers(0, len(data)))
-        return f"truncated at byte {cut}", ".npz" if data[:2] == b"PK" else ".npy", data[:cut]
+        return f"truncated at byte {cut}", suffix, data[:cut]
     if kind == "flip":
         data = bytearray(_npz_bytes(cols))
         for _ in range(int(rng.integers(1, 4))):
@@ -138,7 +149,8 @@ def _damage(rng: np.random.Generator, a: np.ndarray) -> tuple[str, str, bytes]:
         (b"x,y,t,p\n1,2,3,1\n", ".npz"),
         (_npz_bytes(cols), ".csv"),
         (b"", ".npy"),
-    ][int(rng.integers(0, 6))]
+        (_aedat4_bytes(a), ".npz"),
+    ][int(rng.integers(0, 7))]
     return f"suffix {wrong}", wrong, data
 
 
@@ -198,3 +210,33 @@ def test_a_zip_with_a_bad_crc_is_refused_in_one_line(undamaged, tmp_path, capsys
     assert (
         err == f"spikejax detect pipe: error: {path}: truncated or unreadable .npz file (Bad CRC-32 for file 'x.npy')\n"
     )
+
+
+def test_damaged_files_through_the_real_cli(undamaged, tmp_path):
+    # The same check in a process of its own for a few cases: the exit status and stderr are the program's.
+    clean = tmp_path / "clean.npz"
+    clean.write_bytes(_npz_bytes(_columns(undamaged)))
+    cases = [("clean", clean)]
+    rng = np.random.default_rng(SEED + 1)
+    while len(cases) < 4:
+        what, suffix, data = _damage(rng, undamaged)
+        path = tmp_path / f"case{len(cases)}{suffix}"
+        path.write_bytes(data)
+        cases.append((what, path))
+    expected = None
+    for what, path in cases:
+        run = subprocess.run(
+            [sys.executable, "-m", "spikejax.cli", "detect", "pipe", str(path), *ARGS],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        out = run.stdout.replace(str(path), "FILE")
+        if expected is None:
+            assert run.returncode == 0, run.stderr
+            expected = out
+        elif run.returncode == 0:
+            assert out == expected, what
+        else:
+            assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, (what, run.stderr)
+            assert run.stderr.startswith("spikejax detect pipe: error: ") and "Traceback" not in run.stderr

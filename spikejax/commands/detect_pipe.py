@@ -4,6 +4,10 @@ The detection itself is `spikejax.vision.detect.detect` (Alg. 2-3 of the pipe
 paper over the spiking Hough grids); this module is the application around it:
 the flags and their checks, the text table, ``detections.csv`` and the overlay
 figure ``overlay.png`` (matplotlib, imported only when it is drawn).
+
+The flags are checked, against the ranges declared beside the parameters they
+set (`spikejax.ranges`), and the output directory
+(`spikejax.commands.output_directory`) before the recording is read.
 """
 
 from __future__ import annotations

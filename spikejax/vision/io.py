@@ -21,7 +21,9 @@ Functions:
 * `save`: `Events` or a structured array to ``.npz``, ``.npy``
   or ``.aedat4``.
 * `to_slots`: cut a recording into time slots of a fixed event capacity,
-  the input of the slot-by-slot detectors.
+  the input of the slot-by-slot detectors; `slot_index` and `slot_grid`
+  cut a long recording a stretch at a time, in bounded memory.
+* `check_fits`: refuse, with the size, what would not fit in memory.
 
 Conventions: ``sensor_size`` is ``(width, height)`` in pixels, as Tonic's
 ``sensor_size[:2]``. `Events` holds ``t`` in float32 seconds, so
@@ -31,7 +33,9 @@ accepts so that a round trip restores the original stamps exactly. Float32
 seconds resolve 1 us up to about 16 s after ``t0`` and 8 us at 100 s.
 
 Bad input raises `spikejax.errors.UserError` with a one-line message
-naming the problem and the index of the first offending event.
+naming the problem and the index of the first offending event; `read` names
+the file too (a file that is not what its suffix says, a directory, a
+malformed ``sensor_size``, time stamps that do not fit int64).
 """
 
 from __future__ import annotations
