@@ -109,12 +109,13 @@ def test_output_directory_marks_shares_and_cleans_up(tmp_path):
             (out / "part.csv").write_text("1")
             raise KeyboardInterrupt
     assert (tmp_path / "d" / "part.csv").exists()
-    # An empty directory that exists is used and marked; it is not removed on failure.
+    # An empty directory that exists is used and marked; on a failure it is left as it was, empty.
     (tmp_path / "e").mkdir()
     with pytest.raises(UserError):
         with output_directory(tmp_path / "e", command="detect pipe"):
+            assert (tmp_path / "e" / MARKER).is_file()
             raise UserError("x")
-    assert (tmp_path / "e").is_dir()
+    assert (tmp_path / "e").is_dir() and os.listdir(tmp_path / "e") == []
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")

@@ -210,32 +210,35 @@ def output_directory(
         created = path
         while not created.parent.exists():
             created = created.parent
+    marker = path / MARKER
+    fresh = created is not None or not marker.exists()  # nothing of an earlier run is there
     try:
         path.mkdir(parents=True, exist_ok=True)
-        marker = path / MARKER
         wrote = marker.read_text().split("\n") if marker.is_file() else []
         if command not in (line.strip() for line in wrote):
             with open(marker, "a") as f:
                 f.write(f"{command}\n")
     except OSError as err:
-        _remove_unused(created)
+        _remove_unused(path, created, fresh)
         raise _refuse(flag, path, f"cannot write to it ({err.strerror or err.__class__.__name__})") from None
     try:
         yield path
     except BaseException:
-        _remove_unused(created)
+        _remove_unused(path, created, fresh)
         raise
 
 
-def _remove_unused(created: Path | None) -> None:
-    """Remove a directory created by `output_directory` if it holds nothing but markers (best effort)."""
-    if created is None or not created.is_dir() or not _only_marker_tree(created):
-        return
+def _remove_unused(path: Path, created: Path | None, fresh: bool) -> None:
+    """Undo `output_directory` where nothing but markers was written: the directories it created, or its marker
+    in a directory that was empty (best effort)."""
     with contextlib.suppress(OSError):
-        for root, _, files in os.walk(created, topdown=False):
-            for name in files:
-                os.remove(os.path.join(root, name))
-            os.rmdir(root)
+        if created is not None and created.is_dir() and _only_marker_tree(created):
+            for root, _, files in os.walk(created, topdown=False):
+                for name in files:
+                    os.remove(os.path.join(root, name))
+                os.rmdir(root)
+        elif fresh and path.is_dir() and [entry.name for entry in path.iterdir()] == [MARKER]:
+            (path / MARKER).unlink()
 
 
 def _only_marker_tree(path: Path) -> bool:
