@@ -45,6 +45,8 @@ BAD_FLAGS = [
     (["--sub-slots", "0"], "argument --sub-slots: must be at least 1, got 0"),
     (["--capacity", "-3"], "argument --capacity: must be at least 1, got -3"),
     (["--sensor-size", "0", "16"], "argument --sensor-size: must be at least 1, got 0"),
+    (["--sensor-size", "16"], "argument --sensor-size: expected 2 arguments"),
+    (["--sensor-size", "1.5", "16"], "argument --sensor-size: expected a whole number, got '1.5'"),
 ]
 
 
