@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from typing import Any, Callable
 
 import jax
@@ -55,11 +56,20 @@ def cpu_devices_for_run(asked: int | None = None) -> int:
     """The CPU devices a benchmark or run uses: ``asked``, else one per core; returns the count JAX presents.
 
     A process where JAX already started (a test, a notebook) keeps its devices
-    when nothing was asked.
+    when nothing was asked. Asking for more devices than the machine has cores
+    is allowed (the devices then share the cores) and warned of in one line on
+    stderr.
 
     Raises:
         UserError: if ``asked`` is set and JAX already started with another count.
     """
+    cores = os.cpu_count() or 1
+    if asked and int(asked) > cores:
+        print(
+            f"warning: {int(asked)} CPU devices asked for, but this machine has {cores} core{'s' * (cores > 1)}; "
+            "the devices share them (no faster than one device per core)",
+            file=sys.stderr,
+        )
     try:
         use_cpu_devices(int(asked or os.cpu_count() or 1))
     except UserError:

@@ -9,9 +9,10 @@ in (0, pi), a number of gaits in [1, 3]) says so where it is defined, by the
         tau: float = 20e-3
         n_gaits: int = 3
 
-A sweep's trial function declares the ranges of its keyword-only (static)
-parameters the same way, ``@ranged(max_epochs=Range(1, integer=True))`` on the
-function.
+A function's parameters are declared the same way, on the function: a sweep
+trial's keyword-only (static) parameters, ``@ranged(max_epochs=Range(1,
+integer=True))``, or a factory's arguments that become traced values later,
+such as the field of view of `spikejax.vision.pipe.track_params`.
 
 Whoever takes values from a user (a sweep file, a flag) calls ``check`` before
 anything compiles: a value out of range, NaN or infinite is one ``UserError``
@@ -22,6 +23,7 @@ values are tracers there); the edge is where they enter.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
@@ -32,7 +34,7 @@ from spikejax.errors import UserError
 
 __all__ = ["NON_NEGATIVE", "POSITIVE", "Range", "check", "ranged", "ranges_of"]
 
-T = TypeVar("T", bound=type)
+T = TypeVar("T")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,17 +81,12 @@ NON_NEGATIVE = Range(low=0)
 
 
 def ranged(**ranges: Range) -> Callable[[T], T]:
-    """Decorator: declare the valid ranges of some fields of a params NamedTuple, or of
-    some keyword-only parameters of a function (a sweep's trial)."""
+    """Decorator: declare the valid ranges of some fields of a params NamedTuple, or parameters of a function."""
 
     def declare(cls: T) -> T:
-        if isinstance(cls, type):
-            fields = getattr(cls, "_fields", ())
-        else:
-            import inspect
-
-            kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
-            fields = [p.name for p in inspect.signature(cls).parameters.values() if p.kind in kinds]
+        fields = getattr(cls, "_fields", None)
+        if fields is None:
+            fields = tuple(inspect.signature(cls).parameters) if callable(cls) else ()
         unknown = sorted(set(ranges) - set(fields))
         if unknown:
             raise TypeError(f"{cls.__name__} has no field {', '.join(unknown)} to declare a range for")

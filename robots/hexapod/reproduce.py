@@ -26,7 +26,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from robots.common import run_named_sweep, sweep_file, write_csv
-from spikejax.commands import Command, add_common
+from spikejax.commands import Command, add_common, output_directory
 from spikejax.stats import wilson_interval
 
 # Fig. 4 and Sec. III-C: "> 80 %" for one and two gaits, "~ 20 %" for three (100 trials each).
@@ -142,30 +142,33 @@ def run_gaits(
         chunk_size: trials per compiled batch (default: the sweep files').
         no_progress: hide the progress bars.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    sweep = dict(trials=trials, chunk_size=chunk_size, progress=not no_progress)
-    header = ["n_gaits", "trials", "converged", "fraction", "ci_low", "ci_high"]
-    table = run_named_sweep("gait_convergence", out, **sweep)
-    ours = summarize(table, ["n_gaits"])
-    write_csv(out / "gait_convergence.csv", header, ours)
-    blocked = summarize(run_named_sweep("gait_convergence_blocked", out, **sweep), ["n_gaits"])
-    write_csv(out / "gait_convergence_blocked.csv", header, blocked)
-    budget = budget_curve(table, _fixed("gait_convergence")["max_epochs"])
-    write_csv(out / "gait_convergence_budget.csv", ["n_gaits", "presentations", "epochs", "trials", "fraction"], budget)
-    _plot_gaits(out / "gait_convergence.png", ours, blocked, budget)
+    with output_directory(out, command="reproduce gaits", shared_with=("reproduce gait-choices",)) as out:
+        sweep = dict(trials=trials, chunk_size=chunk_size, progress=not no_progress)
+        header = ["n_gaits", "trials", "converged", "fraction", "ci_low", "ci_high"]
+        table = run_named_sweep("gait_convergence", out, **sweep)
+        ours = summarize(table, ["n_gaits"])
+        write_csv(out / "gait_convergence.csv", header, ours)
+        blocked = summarize(run_named_sweep("gait_convergence_blocked", out, **sweep), ["n_gaits"])
+        write_csv(out / "gait_convergence_blocked.csv", header, blocked)
+        budget = budget_curve(table, _fixed("gait_convergence")["max_epochs"])
+        write_csv(
+            out / "gait_convergence_budget.csv", ["n_gaits", "presentations", "epochs", "trials", "fraction"], budget
+        )
+        _plot_gaits(out / "gait_convergence.png", ours, blocked, budget)
 
-    print(f"{'gaits':<10}{'interleaved':>22}{'blocked':>22}{'paper':>10}")
-    for r, b in zip(ours, blocked):
-        p, rel = PAPER[int(r[0])]
-        print(f"{r[0]:<10}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{b[3]:>8.1%} [{b[4]:.1%}, {b[5]:.1%}]{rel:>6}{p:.0%}")
-    paper_like = {r[0]: r[4] for r in budget if r[1] == PAPER_LIKE_BUDGET}
-    print(
-        f"within a shared budget of {PAPER_LIKE_BUDGET} presentations: "
-        + ", ".join(f"{n} gait(s) {f:.1%}" for n, f in paper_like.items())
-    )
-    print(f"wrote {out / 'gait_convergence.csv'} and {out / 'gait_convergence.png'}")
-    return 0
+        print(f"{'gaits':<10}{'interleaved':>22}{'blocked':>22}{'paper':>10}")
+        for r, b in zip(ours, blocked):
+            p, rel = PAPER[int(r[0])]
+            print(
+                f"{r[0]:<10}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{b[3]:>8.1%} [{b[4]:.1%}, {b[5]:.1%}]{rel:>6}{p:.0%}"
+            )
+        paper_like = {r[0]: r[4] for r in budget if r[1] == PAPER_LIKE_BUDGET}
+        print(
+            f"within a shared budget of {PAPER_LIKE_BUDGET} presentations: "
+            + ", ".join(f"{n} gait(s) {f:.1%}" for n, f in paper_like.items())
+        )
+        print(f"wrote {out / 'gait_convergence.csv'} and {out / 'gait_convergence.png'}")
+        return 0
 
 
 def _plot_choices(path: Path, table: dict[str, np.ndarray], budgets: tuple[int, ...]) -> None:
@@ -215,36 +218,35 @@ def run_gait_choices(
         chunk_size: trials per compiled batch (default: the sweep file's).
         no_progress: hide the progress bar.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("gait_choices", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
-    rows = summarize(table, ["alpha", "w_high", "lr"])
-    for row in rows:
-        m = (table["alpha"] == row[0]) & (table["w_high"] == row[1]) & (table["lr"] == row[2])
-        ok = table["converged"][m]
-        row.append(round(float(np.mean(ok & (table["epochs"][m] <= 50))), 4))
-        row.append(float(np.median(table["epochs"][m][ok])) if ok.any() else float("nan"))
-    header = [
-        "alpha",
-        "w_high",
-        "lr",
-        "trials",
-        "converged",
-        "fraction",
-        "ci_low",
-        "ci_high",
-        "fraction_50",
-        "median_epochs",
-    ]
-    write_csv(out / "gait_choices.csv", header, rows)
-    max_epochs = int(table["epochs"].max())
-    _plot_choices(out / "gait_choices.png", table, (50, max(max_epochs, 50)))
-    best = sorted(rows, key=lambda r: -r[5])[:5]
-    print("highest three-gait convergence (alpha, w_high/V_th, eta/V_th): fraction [95 % CI]")
-    for r in best:
-        print(f"  alpha={r[0]:g} w_high={r[1]:g} eta={r[2]:g}: {r[5]:.1%} [{r[6]:.1%}, {r[7]:.1%}]")
-    print(f"wrote {out / 'gait_choices.csv'} and {out / 'gait_choices.png'}")
-    return 0
+    with output_directory(out, command="reproduce gait-choices", shared_with=("reproduce gaits",)) as out:
+        table = run_named_sweep("gait_choices", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
+        rows = summarize(table, ["alpha", "w_high", "lr"])
+        for row in rows:
+            m = (table["alpha"] == row[0]) & (table["w_high"] == row[1]) & (table["lr"] == row[2])
+            ok = table["converged"][m]
+            row.append(round(float(np.mean(ok & (table["epochs"][m] <= 50))), 4))
+            row.append(float(np.median(table["epochs"][m][ok])) if ok.any() else float("nan"))
+        header = [
+            "alpha",
+            "w_high",
+            "lr",
+            "trials",
+            "converged",
+            "fraction",
+            "ci_low",
+            "ci_high",
+            "fraction_50",
+            "median_epochs",
+        ]
+        write_csv(out / "gait_choices.csv", header, rows)
+        max_epochs = int(table["epochs"].max())
+        _plot_choices(out / "gait_choices.png", table, (50, max(max_epochs, 50)))
+        best = sorted(rows, key=lambda r: -r[5])[:5]
+        print("highest three-gait convergence (alpha, w_high/V_th, eta/V_th): fraction [95 % CI]")
+        for r in best:
+            print(f"  alpha={r[0]:g} w_high={r[1]:g} eta={r[2]:g}: {r[5]:.1%} [{r[6]:.1%}, {r[7]:.1%}]")
+        print(f"wrote {out / 'gait_choices.csv'} and {out / 'gait_choices.png'}")
+        return 0
 
 
 gaits_command = Command(

@@ -32,7 +32,7 @@ from robots.common import run_named_sweep, write_csv
 from robots.robobee.controller import ControllerConfig, controller_params
 from robots.robobee.lqr import altitude_params
 from robots.robobee.params import robobee_params
-from spikejax.commands import Command, add_common
+from spikejax.commands import Command, add_common, output_directory
 from spikejax.stats import wilson_interval
 from spikejax.sweep import trial_key
 
@@ -184,22 +184,23 @@ def run_flights(
         chunk_size: flights per compiled batch (default: the sweep file's).
         no_progress: hide the progress bar.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_flights", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
-    rows = flight_rows(table)
-    write_csv(out / "robobee.csv", HEADER, rows)
-    for landing in (0, 1):
-        plan, snn, lqr = _replay(landing)
-        _plot_flight(out / f"robobee_flight{landing + 1}.png", landing, plan, snn, lqr)
-    _plot_seeds(out / "robobee_seeds.png", table)
-    print(f"{'flight':<28}{'ctrl':<6}{'reached':>22}{'rms err':>9}{'err1 mm':>9}{'err2 mm':>9}{'settle1':>9}")
-    for r in rows:
-        print(
-            f"{r[0]:<28}{r[1]:<6}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{r[6]:>9.3f}{r[9]:>9.2f}{r[10]:>9.2f}{r[11]:>9.2f}"
-        )
-    print(f"wrote {out / 'robobee.csv'} and figures in {out}")
-    return 0
+    with output_directory(
+        out, command="reproduce robobee", shared_with=("reproduce robobee-learning", "reproduce robobee-populations")
+    ) as out:
+        table = run_named_sweep("robobee_flights", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
+        rows = flight_rows(table)
+        write_csv(out / "robobee.csv", HEADER, rows)
+        for landing in (0, 1):
+            plan, snn, lqr = _replay(landing)
+            _plot_flight(out / f"robobee_flight{landing + 1}.png", landing, plan, snn, lqr)
+        _plot_seeds(out / "robobee_seeds.png", table)
+        print(f"{'flight':<28}{'ctrl':<6}{'reached':>22}{'rms err':>9}{'err1 mm':>9}{'err2 mm':>9}{'settle1':>9}")
+        for r in rows:
+            print(
+                f"{r[0]:<28}{r[1]:<6}{r[3]:>8.1%} [{r[4]:.1%}, {r[5]:.1%}]{r[6]:>9.3f}{r[9]:>9.2f}{r[10]:>9.2f}{r[11]:>9.2f}"
+            )
+        print(f"wrote {out / 'robobee.csv'} and figures in {out}")
+        return 0
 
 
 def _success_map(
@@ -267,20 +268,21 @@ def run_learning(
         chunk_size: flights per compiled batch (default: the sweep file's).
         no_progress: hide the progress bar.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_learning", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
-    _success_map(
-        out,
-        "robobee_learning",
-        table,
-        "mu",
-        "tau_reward",
-        ("learning rate mu", "reward time constant tau (ms)"),
-        "flight 1, robots +-20 %: both waypoints reached (%)",
-        ("{:g}".format, lambda tau: f"{1e3 * tau:g}"),
-    )
-    return 0
+    with output_directory(
+        out, command="reproduce robobee-learning", shared_with=("reproduce robobee", "reproduce robobee-populations")
+    ) as out:
+        table = run_named_sweep("robobee_learning", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
+        _success_map(
+            out,
+            "robobee_learning",
+            table,
+            "mu",
+            "tau_reward",
+            ("learning rate mu", "reward time constant tau (ms)"),
+            "flight 1, robots +-20 %: both waypoints reached (%)",
+            ("{:g}".format, lambda tau: f"{1e3 * tau:g}"),
+        )
+        return 0
 
 
 def run_populations(
@@ -294,19 +296,22 @@ def run_populations(
         chunk_size: flights per compiled batch (default: the sweep file's).
         no_progress: hide the progress bar.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = run_named_sweep("robobee_populations", out, trials=trials, chunk_size=chunk_size, progress=not no_progress)
-    _success_map(
-        out,
-        "robobee_populations",
-        table,
-        "n_per_input",
-        "n_hidden",
-        ("input neurons per state variable", "hidden neurons"),
-        "flight 1, robots +-20 %, 50 output neurons: both waypoints reached (%)",
-    )
-    return 0
+    with output_directory(
+        out, command="reproduce robobee-populations", shared_with=("reproduce robobee", "reproduce robobee-learning")
+    ) as out:
+        table = run_named_sweep(
+            "robobee_populations", out, trials=trials, chunk_size=chunk_size, progress=not no_progress
+        )
+        _success_map(
+            out,
+            "robobee_populations",
+            table,
+            "n_per_input",
+            "n_hidden",
+            ("input neurons per state variable", "hidden neurons"),
+            "flight 1, robots +-20 %, 50 output neurons: both waypoints reached (%)",
+        )
+        return 0
 
 
 flights_command = Command(

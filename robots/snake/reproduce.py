@@ -39,7 +39,7 @@ from matplotlib.figure import Figure
 from robots.common import write_csv
 from robots.snake import steering, tracks
 from robots.snake.gait import gait_params, gait_period, joint_targets
-from spikejax.commands import Command, add_common
+from spikejax.commands import Command, add_common, output_directory
 from spikejax.errors import UserError
 
 if TYPE_CHECKING:
@@ -320,19 +320,19 @@ def run_gait(*, out: str | Path, no_progress: bool = False) -> int:
         out: output directory.
         no_progress: hide the progress bar.
     """
-    out = Path(out)
-    rows = run(out, _scale(), progress=not no_progress)
-    print("C_o  comp  speed m/s  turn deg/s  head yaw amp deg")
-    for r in rows["gait"]:
-        print(f"{r[0]:+.2f}  {r[1]}     {r[2]:.3f}      {r[3]:+7.2f}     {r[4]:.2f}")
-    print("track            mean |a_head| deg   lost at s")
-    for r in rows["tracking"]:
-        print(f"{r[0]:<16} {r[2]:8.2f}           {r[4] or 'never'}")
-    print(
-        f"wrote {out}/snake_gait.csv, snake_tracking.csv, snake_trajectories.png, snake_events.png, "
-        f"snake_tracking.png, snake.gif"
-    )
-    return 0
+    with output_directory(out, command="reproduce snake-gait") as out:
+        rows = run(out, _scale(), progress=not no_progress)
+        print("C_o  comp  speed m/s  turn deg/s  head yaw amp deg")
+        for r in rows["gait"]:
+            print(f"{r[0]:+.2f}  {r[1]}     {r[2]:.3f}      {r[3]:+7.2f}     {r[4]:.2f}")
+        print("track            mean |a_head| deg   lost at s")
+        for r in rows["tracking"]:
+            print(f"{r[0]:<16} {r[2]:8.2f}           {r[4] or 'never'}")
+        print(
+            f"wrote {out}/snake_gait.csv, snake_tracking.csv, snake_trajectories.png, snake_events.png, "
+            f"snake_tracking.png, snake.gif"
+        )
+        return 0
 
 
 gait_command = Command(

@@ -17,11 +17,28 @@ import JAX at its top.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import inspect
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
 
-__all__ = ["Command", "OneLineParser", "add_common", "count", "positive_float", "run_parameters"]
+from spikejax.errors import UserError
+
+__all__ = [
+    "MARKER",
+    "Command",
+    "OneLineParser",
+    "add_common",
+    "count",
+    "output_directory",
+    "positive_float",
+    "run_parameters",
+]
+
+MARKER = ".spikejax-output"
+"""The file that marks a command's output directory: one line per command that wrote there."""
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -114,3 +131,119 @@ def add_common(
         parser.add_argument("--chunk-size", type=count, default=None, help="trials per compiled batch")
     if progress:
         parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def _refuse(flag: str, path: Path, why: str) -> UserError:
+    return UserError(f"{flag} {path}: {why}")
+
+
+def _check_output(path: Path, command: str, flag: str, shared_with: Iterable[str]) -> None:
+    """Refuse an output directory that cannot be used, without touching anything."""
+    if path.exists() and not path.is_dir():
+        raise _refuse(flag, path, "is a file, not a directory")
+    if not path.exists():
+        above = path.parent
+        while not above.exists() and above != above.parent:
+            above = above.parent
+        if not above.is_dir():
+            raise _refuse(flag, path, f"{above} is a file, not a directory")
+        if not os.access(above, os.W_OK | os.X_OK):
+            raise _refuse(flag, path, f"cannot create it, {above} is not writable")
+        return
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise _refuse(flag, path, "the directory is not writable")
+    if not any(path.iterdir()):
+        return
+    marker = path / MARKER
+    if not marker.is_file():
+        raise _refuse(
+            flag,
+            path,
+            f"the directory is not empty and is not an earlier output of spikejax {command} "
+            f"(no {MARKER} in it); give a new or an empty directory",
+        )
+    try:
+        wrote = [line.strip() for line in marker.read_text().splitlines() if line.strip()]
+    except (OSError, UnicodeDecodeError) as err:
+        raise _refuse(flag, path, f"cannot read {MARKER} ({err.__class__.__name__})") from None
+    if not {command, *shared_with} & set(wrote):
+        raise _refuse(
+            flag,
+            path,
+            f"the directory holds the output of spikejax {', '.join(wrote) or 'another command'}, "
+            f"not of spikejax {command}; give a new or an empty directory",
+        )
+
+
+@contextlib.contextmanager
+def output_directory(
+    path: str | os.PathLike, *, command: str, flag: str = "--out", shared_with: Iterable[str] = ()
+) -> Iterator[Path]:
+    """The output directory of a command, checked before any work; ``with output_directory(out, command=...)``.
+
+    A path that cannot be used is refused at once with a one-line `UserError`
+    naming ``flag``: a file, a path below a file, a directory that is not
+    writable, or a non-empty directory that is not an earlier output of
+    ``command`` (or of one of ``shared_with``): the file `MARKER`, written into
+    the directory on first use, names the commands that wrote there. An earlier
+    output is used again (a command resumes or overwrites its own files).
+
+    The directory (and its parents) is created on entry; if the block raises
+    and leaves nothing in a directory created here but the marker, the
+    directory is removed again, so a refused input leaves no empty output
+    directory behind.
+
+    Args:
+        path: the directory the user gave.
+        command: the command, as typed after ``spikejax`` (``"detect pipe"``).
+        flag: the flag the path came from, for the messages.
+        shared_with: other commands whose output may share the directory
+            (``make demo`` writes ``reproduce gaits`` and ``reproduce gait-choices`` into one).
+
+    Yields:
+        The directory, a `pathlib.Path`.
+    """
+    path = Path(path)
+    _check_output(path, command, flag, shared_with)
+    created = None
+    if not path.exists():
+        created = path
+        while not created.parent.exists():
+            created = created.parent
+    marker = path / MARKER
+    fresh = created is not None or not marker.exists()  # nothing of an earlier run is there
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        wrote = marker.read_text().split("\n") if marker.is_file() else []
+        if command not in (line.strip() for line in wrote):
+            with open(marker, "a") as f:
+                f.write(f"{command}\n")
+    except OSError as err:
+        _remove_unused(path, created, fresh)
+        raise _refuse(flag, path, f"cannot write to it ({err.strerror or err.__class__.__name__})") from None
+    try:
+        yield path
+    except BaseException:
+        _remove_unused(path, created, fresh)
+        raise
+
+
+def _remove_unused(path: Path, created: Path | None, fresh: bool) -> None:
+    """Undo `output_directory` where nothing but markers was written: the directories it created, or its marker
+    in a directory that was empty (best effort)."""
+    with contextlib.suppress(OSError):
+        if created is not None and created.is_dir() and _only_marker_tree(created):
+            for root, _, files in os.walk(created, topdown=False):
+                for name in files:
+                    os.remove(os.path.join(root, name))
+                os.rmdir(root)
+        elif fresh and path.is_dir() and [entry.name for entry in path.iterdir()] == [MARKER]:
+            (path / MARKER).unlink()
+
+
+def _only_marker_tree(path: Path) -> bool:
+    """Whether ``path`` holds nothing but empty directories and marker files."""
+    for root, _, files in os.walk(path):
+        if any(name != MARKER for name in files):
+            return False
+    return True

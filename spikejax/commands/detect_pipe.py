@@ -4,10 +4,15 @@ The detection itself is `spikejax.vision.detect.detect` (Alg. 2-3 of the pipe
 paper over the spiking Hough grids); this module is the application around it:
 the flags and their checks, the text table, ``detections.csv`` and the overlay
 figure ``overlay.png`` (matplotlib, imported only when it is drawn).
+
+The flags are checked, against the ranges declared beside the parameters they
+set (`spikejax.ranges`), and the output directory
+(`spikejax.commands.output_directory`) before the recording is read.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import sys
@@ -16,12 +21,24 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from spikejax.commands import Command
+from spikejax.commands import Command, count, output_directory
 from spikejax.errors import UserError
-from spikejax.vision import io, pipe
+from spikejax.ranges import check
+from spikejax.vision import hough, io, pipe
 from spikejax.vision.detect import Detections, detect, detector_params
 
-__all__ = ["COLUMNS", "command", "draw_line", "edges", "event_frame", "format_table", "overlay", "run", "write_csv"]
+__all__ = [
+    "COLUMNS",
+    "check_flags",
+    "command",
+    "draw_line",
+    "edges",
+    "event_frame",
+    "format_table",
+    "overlay",
+    "run",
+    "write_csv",
+]
 
 COLUMNS = ("t", "kind", "theta_deg", "width_px", "pos_px", "row_px", "distance_m", "offset_m", "control", "score")
 
@@ -34,11 +51,11 @@ def _add_arguments(parser) -> None:
     parser.add_argument("--out", default=None, help="write detections.csv and overlay.png here")
     parser.add_argument("--slot", type=float, default=0.02, help="time slot, s (default 0.02)")
     parser.add_argument(
-        "--sub-slots", type=int, default=5, help="updates per slot; a neuron fires at most once per update"
+        "--sub-slots", type=count, default=5, help="updates per slot; a neuron fires at most once per update"
     )
-    parser.add_argument("--capacity", type=int, default=4096, help="events per update (the rest are counted)")
+    parser.add_argument("--capacity", type=count, default=4096, help="events per update (the rest are counted)")
     parser.add_argument(
-        "--sensor-size", type=int, nargs=2, metavar=("W", "H"), default=None, help="default: the file's, else 128 128"
+        "--sensor-size", type=count, nargs=2, metavar=("W", "H"), default=None, help="default: the file's, else 128 128"
     )
     parser.add_argument(
         "--shapes", choices=("both", "lines", "circles"), default="both", help="bodies (lines), entries (circles)"
@@ -88,13 +105,47 @@ def run(
         speed: forward speed, m/s (distance by Eq. (9) of the pipe paper otherwise).
         no_progress: hide the progress bar.
     """
-    for flag, value in (("slot", slot), ("fov", fov)):
-        if not value > 0:
-            raise UserError(f"--{flag} must be > 0, not {value}")
-    if pipe_size < 0 or speed < 0:
-        raise UserError("--pipe-size and --speed must be >= 0")
-    if sub_slots < 1 or capacity < 1:
-        raise UserError("--sub-slots and --capacity must be >= 1")
+    check_flags(
+        slot=slot,
+        sub_slots=sub_slots,
+        capacity=capacity,
+        v_th=v_th,
+        decay=decay,
+        fov=fov,
+        pipe_size=pipe_size,
+        speed=speed,
+    )
+    with output_directory(out, command="detect pipe") if out else contextlib.nullcontext() as out_dir:
+        return _detect(
+            file=file, mode=mode, out=out_dir, slot=slot, sub_slots=sub_slots, capacity=capacity,
+            sensor_size=sensor_size, shapes=shapes, v_th=v_th, decay=decay, fov=fov, pipe_size=pipe_size,
+            speed=speed, no_progress=no_progress,
+        )  # fmt: skip
+
+
+def check_flags(*, slot, sub_slots, capacity, v_th, decay, fov, pipe_size, speed) -> None:
+    """Check the flags against the ranges declared beside the parameters they set (a UserError naming the flag).
+
+    ``--fov`` is in degrees, the field of view of `spikejax.vision.pipe.track_params` in radians.
+    """
+    check(
+        detect,
+        {"slot": slot, "sub_slots": sub_slots, "capacity": capacity},
+        names={"slot": "--slot", "sub_slots": "--sub-slots", "capacity": "--capacity"},
+    )
+    check(
+        hough.HoughParams,
+        {"decay": decay, **({} if v_th is None else {"v_th": v_th})},
+        names={"v_th": "--v-th", "decay": "--decay"},
+    )
+    check(pipe.track_params, {"fov": math.radians(fov)}, names={"fov": "--fov"}, scales={"fov": 180 / math.pi})
+    check(pipe.TrackParams, {"size": pipe_size, "speed": speed}, names={"size": "--pipe-size", "speed": "--speed"})
+
+
+def _detect(
+    *, file, mode, out, slot, sub_slots, capacity, sensor_size, shapes, v_th, decay, fov, pipe_size, speed, no_progress
+) -> int:
+    """`run` once the flags and the output directory are checked."""
     events, size = io.read(file, sensor_size)
     if len(events) == 0:
         raise UserError(f"{file}: no events")
@@ -106,19 +157,22 @@ def run(
             file=sys.stderr,
         )
     track = pipe.track_params(fov=math.radians(fov), width=size[0], size=pipe_size, speed=speed)
-    found = detect(
-        events,
-        size,
-        mode=mode,
-        slot=slot,
-        sub_slots=sub_slots,
-        capacity=capacity,
-        lines=shapes != "circles",
-        circles=shapes != "lines",
-        params=detector_params(v_th=0.5 * size[1] if v_th is None else v_th, decay=decay),
-        track=track,
-        progress=not no_progress,
-    )
+    try:
+        found = detect(
+            events,
+            size,
+            mode=mode,
+            slot=slot,
+            sub_slots=sub_slots,
+            capacity=capacity,
+            lines=shapes != "circles",
+            circles=shapes != "lines",
+            params=detector_params(v_th=0.5 * size[1] if v_th is None else v_th, decay=decay),
+            track=track,
+            progress=not no_progress,
+        )
+    except UserError as err:  # the recording's span or sensor (the flags were checked above)
+        raise UserError(f"{file}: {err}") from None
     rows = found.table()
     duration = (events["t"][-1] - events["t"][0]) * 1e-6
     print(
@@ -132,8 +186,6 @@ def run(
         )
     print(format_table(rows))
     if out:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
         write_csv(out / "detections.csv", rows)
         overlay(out / "overlay.png", events, size, found, slot)
         print(f"wrote {out / 'detections.csv'} and {out / 'overlay.png'}")

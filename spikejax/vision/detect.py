@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spikejax.errors import UserError
+from spikejax.ranges import POSITIVE, Range, check, ranged
 from spikejax.vision import hough, io
 from spikejax.vision import pipe as pp
 from spikejax.vision.events import Events
@@ -256,16 +257,11 @@ class Detections(NamedTuple):
         return sorted(rows, key=lambda r: (r["t"], r["kind"]))
 
 
-def _parts(a: np.ndarray, det: Detector, slot: float, capacity: int) -> tuple[io.Slots, int]:
-    part = slot / det.sub_slots
-    parts = io.to_slots(a, part, capacity)
-    n_parts = parts.events.x.shape[0]
-    n_slots = max(1, -(-n_parts // det.sub_slots))
-    if n_slots * det.sub_slots != n_parts:
-        parts = io.to_slots(a, part, capacity, n_slots=n_slots * det.sub_slots)
-    return parts, n_slots
+# Host bytes a slot's results take (two `Pipe`s, two `Estimate`s, the overflow), for the memory check.
+_SLOT_RESULT_BYTES = 2 * 8 * 4 + 2 * 6 * 4 + 8
 
 
+@ranged(slot=POSITIVE, sub_slots=Range(1, integer=True), capacity=Range(1, integer=True), chunk=Range(1, integer=True))
 def detect(
     events: np.ndarray,
     sensor_size: tuple[int, int] = (128, 128),
@@ -283,11 +279,16 @@ def detect(
 ) -> Detections:
     """Detect pipes in a recording: Alg. 2 slot by slot, then Alg. 3.
 
+    The recording is cut into slots a chunk at a time, so the memory does not
+    grow with its length; a chunk without events, reached while every neuron is
+    at rest, is not computed (its slots detect nothing, and the grids stay at
+    rest). Fields of a slot without a detection (``valid`` False) carry no meaning.
+
     Args:
         events: canonical structured array (`spikejax.vision.io.read`).
         sensor_size: ``(width, height)``; the grids are the paper's for this size.
         mode: ``"sync"`` or ``"async"`` (see `spikejax.vision.hough`).
-        slot: slot length, s.
+        slot: slot length, s (> 0).
         sub_slots: parts per slot.
         capacity: events per part; the rest are counted in ``overflow``.
         lines, circles: which grids to run.
@@ -300,7 +301,12 @@ def detect(
 
     Returns:
         `Detections`.
+
+    Raises:
+        UserError: a parameter out of its range, or a recording (its span in
+            slots) or sensor (its grids) that would not fit in memory, with the size.
     """
+    check(detect, {"slot": slot, "sub_slots": sub_slots, "capacity": capacity, "chunk": chunk})
     width, height = sensor_size
     det = Detector(
         line=hough.LineGrid(width, height) if lines else None,
@@ -308,32 +314,88 @@ def detect(
         mode=mode,
         sub_slots=sub_slots,
     )
+    cells = sum(g.size for g in (det.line, det.circle) if g is not None)
+    # Per cell: potential and time (float32), a slot's spikes (int8 per part), its counts and votes;
+    # the line grid's table of the cell of every pixel at every angle, built in float64 (`hough.line_table`).
+    table = 0 if det.line is None else width * height * det.line.n_theta
+    io.check_fits(cells * (24 + sub_slots) + table * 32, f"the Hough grids of a {width}x{height} sensor")
     params = detector_params(v_th=0.5 * height) if params is None else params
     track = pp.track_params(width=width) if track is None else track
-    parts, n_slots = _parts(events, det, slot, capacity)
     part = slot / det.sub_slots
-    ends = ((np.arange(n_slots * det.sub_slots) + 1) * part).reshape(n_slots, det.sub_slots)
-    batch = jax.tree.map(lambda v: np.asarray(v).reshape(n_slots, det.sub_slots, -1), parts.events)
+    t0 = int(events["t"][0]) if len(events) else 0
+    index = io.slot_index(events, part, t0)
+    n_parts = int(index[-1]) + 1 if len(events) else 0
+    n_slots = max(1, -(-n_parts // det.sub_slots))
+    io.check_fits(
+        n_slots * _SLOT_RESULT_BYTES,
+        f"the results of {n_slots} slots of {slot * 1e3:g} ms ({(n_slots * slot):.0f} s of recording)",
+    )
     chunk = max(1, min(chunk, n_slots))
     state = _init(det)
-    bodies, entries = [], []
+    bodies, entries, overflow = [], [], []
     bar = _progress(n_slots, progress)
-    for start in range(0, n_slots, chunk):
+    start = 0
+    while start < n_slots:
         stop = min(start + chunk, n_slots)
-        ev = jax.tree.map(lambda v: _pad(v[start:stop], chunk), batch)
-        ts = _pad(ends[start:stop], chunk, edge=True)
+        first, parts = start * det.sub_slots, chunk * det.sub_slots
+        lo, hi = np.searchsorted(index, [first, first + parts])
+        if lo == hi and _can_skip(det, state):
+            # Up to the chunk of the next event, nothing is computed (see `_can_skip`).
+            later = n_slots if lo == len(index) else int(index[lo]) // det.sub_slots // chunk * chunk
+            stop = min(max(later, stop), n_slots)
+            slot_ends = (np.arange(start, stop) * det.sub_slots + det.sub_slots) * part
+            state = _rested(det, state, slot_ends[-1])
+            bodies.append(_nothing(pp.BODY, slot_ends))
+            entries.append(_nothing(pp.ENTRY, slot_ends))
+            overflow.append(np.zeros(stop - start, np.int64))
+            bar.update(stop - start)
+            start = stop
+            continue
+        ends = (np.arange(first, first + parts) + 1) * part
+        ev, over = io.slot_grid(events[lo:hi], index[lo:hi], capacity, parts, t0=t0, first=first)
+        ev = jax.tree.map(lambda v: v.reshape(chunk, det.sub_slots, -1), ev)
+        ts = ends.reshape(chunk, det.sub_slots)
+        if stop - start < chunk:
+            ts = _pad(ts[: stop - start], chunk, edge=True)
         # Padded slots are empty and come last: the state after them is never used.
         state, b, e = _run_jit(det, params, ev, ts, state)
         bodies.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], b))
         entries.append(jax.tree.map(lambda v: np.asarray(v)[: stop - start], e))
+        overflow.append(over.reshape(chunk, det.sub_slots).sum(axis=1)[: stop - start])
         bar.update(stop - start)
+        start = stop
     bar.close()
     cat = lambda parts_: jax.tree.map(lambda *v: np.concatenate(v), *parts_)
     bodies, entries = cat(bodies), cat(entries)
     est_body = jax.tree.map(np.asarray, pp.track(track, jax.tree.map(jnp.asarray, bodies)))
     est_entry = jax.tree.map(np.asarray, pp.track(track, jax.tree.map(jnp.asarray, entries)))
-    overflow = parts.overflow.reshape(n_slots, det.sub_slots).sum(axis=1)
-    return Detections(bodies, entries, est_body, est_entry, overflow, parts.t0)
+    return Detections(bodies, entries, est_body, est_entry, np.concatenate(overflow), t0)
+
+
+def _can_skip(det: Detector, state: DetectorState) -> bool:
+    """Whether slots without events can be left uncomputed: they detect nothing, and the state after them is known.
+
+    Asynchronously an empty slot updates no neuron; synchronously every neuron
+    decays, which changes nothing once every potential is 0.
+    """
+    return det.mode == "async" or all(bool(jnp.all(s.v == 0)) for s in state if s is not None)
+
+
+def _rested(det: Detector, state: DetectorState, end: float) -> DetectorState:
+    """The state after empty slots from rest: async leaves it as it is, sync stamps every neuron with the end."""
+    if det.mode == "async":
+        return state
+    t = jnp.float32(end)
+    return DetectorState(*(None if s is None else hough.HoughState(s.v, jnp.full_like(s.t, t)) for s in state))
+
+
+def _nothing(kind: int, slot_ends: np.ndarray) -> pp.Pipe:
+    """What slots without a detection hold: their time stamps (the end of each), the kind, ``valid`` False."""
+    n = len(slot_ends)
+    zeros = np.zeros(n, np.float32)
+    return pp.Pipe(
+        slot_ends.astype(np.float32), zeros, zeros, zeros, zeros, np.full(n, kind, np.int32), zeros, np.zeros(n, bool)
+    )
 
 
 def _pad(v: np.ndarray, n: int, edge: bool = False) -> np.ndarray:

@@ -21,7 +21,9 @@ Functions:
 * `save`: `Events` or a structured array to ``.npz``, ``.npy``
   or ``.aedat4``.
 * `to_slots`: cut a recording into time slots of a fixed event capacity,
-  the input of the slot-by-slot detectors.
+  the input of the slot-by-slot detectors; `slot_index` and `slot_grid`
+  cut a long recording a stretch at a time, in bounded memory.
+* `check_fits`: refuse, with the size, what would not fit in memory.
 
 Conventions: ``sensor_size`` is ``(width, height)`` in pixels, as Tonic's
 ``sensor_size[:2]``. `Events` holds ``t`` in float32 seconds, so
@@ -31,7 +33,9 @@ accepts so that a round trip restores the original stamps exactly. Float32
 seconds resolve 1 us up to about 16 s after ``t0`` and 8 us at 100 s.
 
 Bad input raises `spikejax.errors.UserError` with a one-line message
-naming the problem and the index of the first offending event.
+naming the problem and the index of the first offending event; `read` names
+the file too (a file that is not what its suffix says, a directory, a
+malformed ``sensor_size``, time stamps that do not fit int64).
 """
 
 from __future__ import annotations
@@ -56,7 +60,10 @@ __all__ = [
     "load",
     "normalize",
     "read",
+    "check_fits",
     "save",
+    "slot_grid",
+    "slot_index",
     "to_slots",
     "to_structured",
 ]
@@ -132,7 +139,7 @@ def _polarity(p: np.ndarray) -> np.ndarray:
 
 def _integral(name: str, values: np.ndarray) -> np.ndarray:
     """Check a coordinate or time column is finite and integer-valued; return int64."""
-    if values.dtype == np.bool_ or not np.issubdtype(values.dtype, np.number):
+    if values.dtype.kind not in "iuf":
         raise UserError(f"field {name!r} has dtype {values.dtype}; expected numbers")
     if np.issubdtype(values.dtype, np.floating):
         bad = ~np.isfinite(values)
@@ -143,6 +150,15 @@ def _integral(name: str, values: np.ndarray) -> np.ndarray:
         if bad.any():
             i = _first(bad)
             raise UserError(f"{name}={values[i]} at event {i} is not a whole number")
+        bad = (values < -(2.0**63)) | (values >= 2.0**63)
+    elif np.issubdtype(values.dtype, np.unsignedinteger) and values.dtype.itemsize >= 8:
+        bad = values > np.iinfo(np.int64).max
+    else:
+        bad = np.zeros(values.shape, bool)
+    if bad.any():
+        # A cast would wrap around (and could hide time stamps going backwards).
+        i = _first(bad)
+        raise UserError(f"{name}={values[i]} at event {i} does not fit a signed 64-bit integer")
     return values.astype(np.int64)
 
 
@@ -191,13 +207,25 @@ def normalize(events: np.ndarray, sensor_size: tuple[int, int] = DVS128) -> np.n
 
 
 def _check_sensor_size(sensor_size) -> tuple[int, int]:
+    """``(width, height)`` as two whole numbers >= 1 (a one-line UserError naming what was given otherwise)."""
+    shown = _shown(sensor_size)
     try:
-        width, height = (int(s) for s in sensor_size)
+        values = np.asarray(sensor_size)
+        if values.ndim != 1 or len(values) != 2 or values.dtype.kind not in "iuf":
+            raise TypeError
+        width, height = (float(v) for v in values)
     except (TypeError, ValueError):
-        raise UserError(f"sensor_size must be (width, height), not {sensor_size!r}") from None
-    if width <= 0 or height <= 0:
-        raise UserError(f"sensor_size must be positive, not {width}x{height}")
-    return width, height
+        raise UserError(f"sensor_size must be (width, height), two whole numbers, not {shown}") from None
+    for v in (width, height):
+        if not (np.isfinite(v) and v == round(v) and 1 <= v < 2**31):
+            raise UserError(f"sensor_size must be two whole numbers >= 1, not {shown}")
+    return int(width), int(height)
+
+
+def _shown(value) -> str:
+    """A short, one-line rendering of a value for a message."""
+    text = " ".join(repr(value.tolist() if isinstance(value, np.ndarray) else value).split())
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def from_structured(
@@ -325,27 +353,30 @@ def read(path, sensor_size: tuple[int, int] | None = None) -> tuple[np.ndarray, 
         UserError: a missing, truncated or unreadable file, or bad events.
     """
     path = Path(path)
+    if path.is_dir():
+        raise UserError(f"{path}: is a directory, not an event file")
     suffix = _suffix(path)
     if not path.is_file():
-        raise UserError(f"{path}: no such file")
+        raise UserError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
     stated = None
     if suffix == ".aedat4":
         array, stated = _read_aedat4(path)
     else:
+        _check_magic(path, suffix)
         try:
             loaded = np.load(path, allow_pickle=False)
         except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
-            raise UserError(f"{path}: truncated or unreadable {suffix} file ({err})") from None
+            raise _unreadable(path, suffix, err) from None
         if suffix == ".npy":
             array = loaded
         else:
             with loaded:
                 try:
                     array, stated = _from_npz(loaded)
-                except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
-                    raise UserError(f"{path}: truncated or unreadable .npz file ({err})") from None
                 except UserError as err:
                     raise UserError(f"{path}: {err}") from None
+                except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+                    raise _unreadable(path, suffix, err) from None
     size = sensor_size if sensor_size is not None else stated if stated is not None else DVS128
     try:
         return normalize(array, size), _check_sensor_size(size)
@@ -356,9 +387,43 @@ def read(path, sensor_size: tuple[int, int] | None = None) -> tuple[np.ndarray, 
         raise UserError(f"{path}: {err}{hint}") from None
 
 
+def _unreadable(path: Path, suffix: str, err: Exception) -> UserError:
+    if "pickle" in str(err):
+        return UserError(f"{path}: holds Python objects (pickled data), not arrays of numbers; they are not read")
+    detail = " ".join(str(err).split()) or err.__class__.__name__
+    return UserError(f"{path}: truncated or unreadable {suffix} file ({detail})")
+
+
+_MAGIC = {".npz": (b"PK\x03\x04", b"PK\x05\x06"), ".npy": (b"\x93NUMPY",)}
+_WHAT = {".npz": "an .npz file (a zip archive of arrays)", ".npy": "an .npy file (a NumPy array)"}
+
+
+def _check_magic(path: Path, suffix: str) -> None:
+    """Refuse a file that does not start as its suffix says (a text file renamed ``.npz``)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError as err:
+        raise UserError(f"{path}: cannot read it ({err.strerror or err.__class__.__name__})") from None
+    if not head:
+        raise UserError(f"{path}: empty file, not {_WHAT[suffix]}")
+    if not any(head.startswith(m) for m in _MAGIC[suffix]):
+        other = [s for s, magic in _MAGIC.items() if any(head.startswith(m) for m in magic)]
+        found = f"it is {_WHAT[other[0]]}, named {suffix}" if other else f"its first bytes are {head[:8]!r}"
+        raise UserError(f"{path}: not {_WHAT[suffix]}; {found}")
+
+
+def _stated_size(value) -> tuple[int, int]:
+    """The ``sensor_size`` an .npz states: ``(width, height)``, or Tonic's ``(width, height, 2)``."""
+    value = np.asarray(value)
+    if value.ndim != 1 or len(value) not in (2, 3):
+        raise UserError(f"sensor_size must be (width, height), not {_shown(value)}")
+    return _check_sensor_size(value[:2])
+
+
 def _from_npz(npz) -> tuple[np.ndarray, tuple[int, int] | None]:
     keys = set(npz.files)
-    stated = tuple(int(s) for s in npz["sensor_size"][:2]) if "sensor_size" in keys else None
+    stated = _stated_size(npz["sensor_size"]) if "sensor_size" in keys else None
     if {"x", "y", "t", "p"} <= keys:
         columns = {k: np.asarray(npz[k]).reshape(-1) for k in ("x", "y", "t", "p")}
         lengths = {k: len(v) for k, v in columns.items()}
@@ -533,6 +598,101 @@ def _write_aedat4(path: Path, a: np.ndarray, size: tuple[int, int], packet: int 
 # --- slots -------------------------------------------------------------------
 
 
+def check_fits(nbytes: float, what: str) -> None:
+    """Refuse (a one-line UserError naming the size) what would need more than half of this machine's memory."""
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return
+    if nbytes > 0.5 * memory:
+        raise UserError(f"{what} would need {_bytes(nbytes)} of memory, more than this machine has ({_bytes(memory)})")
+
+
+def _bytes(n: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB", "TB", "PB"):
+        if n < 1000 or unit == "PB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} PB"  # pragma: no cover
+
+
+SLOT_EVENT_BYTES = 17
+"""Host bytes per event place of a slot (x, y, t, p as 32-bit numbers, and the valid flag)."""
+
+
+def slot_index(events: np.ndarray, slot: float, t0: int | None = None) -> np.ndarray:
+    """The slot of each event: ``k`` for ``t0 + k * slot <= t < t0 + (k + 1) * slot`` (``slot`` in s, > 0).
+
+    Args:
+        events: array in `EVENT_DTYPE`, time stamps non-decreasing.
+        slot: slot length, seconds.
+        t0: start of slot 0, us (default: the first event's stamp).
+
+    Returns:
+        ``(n,)`` int64, non-decreasing.
+    """
+    if not slot > 0:
+        raise UserError(f"slot length must be > 0 s, not {slot}")
+    t0 = _t0(events, t0)
+    t = events["t"]
+    if len(t) and (int(t[-1]) - t0 >= 2**62 or int(t[0]) - t0 <= -(2**62)):
+        raise UserError(
+            f"the recording spans {int(t[-1]) - int(t[0])} us, more than 2^62 us: too long to cut into slots"
+        )
+    slot_us = slot * 1e6
+    if abs(slot_us - round(slot_us)) < 1e-6:
+        # Whole microseconds: integer division, so that an event stamped exactly
+        # on a boundary opens the next slot whatever the float rounding.
+        return (t - t0) // int(round(slot_us))
+    return np.floor((t - t0) / slot_us).astype(np.int64)
+
+
+def slot_grid(
+    events: np.ndarray, index: np.ndarray, capacity: int, n_slots: int, *, t0: int, first: int = 0
+) -> tuple[Events, np.ndarray]:
+    """Slots ``first .. first + n_slots - 1`` of a recording as `Events` rows of ``capacity`` places.
+
+    Args:
+        events: array in `EVENT_DTYPE`.
+        index: the slot of each event (`slot_index`).
+        capacity: event places per slot; the first events of a slot in time order are kept.
+        n_slots: number of slots.
+        t0: absolute time (us) of ``t = 0``.
+        first: the first slot's index.
+
+    Returns:
+        ``(events, overflow)``: leaves ``(n_slots, capacity)``, and ``(n_slots,)`` events that did not fit.
+    """
+    if capacity <= 0:
+        raise UserError(f"capacity must be > 0, not {capacity}")
+    check_fits(n_slots * capacity * SLOT_EVENT_BYTES, f"{n_slots} slots of {capacity} events")
+    lo, hi = np.searchsorted(index, [first, first + n_slots])
+    local = index[lo:hi] - first
+    part = events[lo:hi]
+    counts = np.bincount(local, minlength=n_slots)
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    rank = np.arange(len(local)) - start[local]
+    fits = rank < capacity
+    rows, cols, src = local[fits], rank[fits], np.flatnonzero(fits)
+    seconds = (part["t"][src] - t0).astype(np.float64) * 1e-6
+
+    def grid(values, dtype):
+        out = np.zeros((n_slots, capacity), dtype)
+        out[rows, cols] = values
+        return jnp.asarray(out)
+
+    valid = np.zeros((n_slots, capacity), bool)
+    valid[rows, cols] = True
+    batch = Events(
+        x=grid(part["x"][src], np.int32),
+        y=grid(part["y"][src], np.int32),
+        t=grid(seconds, np.float32),
+        p=grid(part["p"][src], np.int32),
+        valid=jnp.asarray(valid),
+    )
+    return batch, np.maximum(counts - capacity, 0)
+
+
 def to_slots(
     events: np.ndarray,
     slot: float,
@@ -548,6 +708,11 @@ def to_slots(
     rest are counted in ``overflow[k]``. This is the "for each time slot" of
     Alg. 2 of the snake pipe-tracking paper.
 
+    Every slot is held at once (``n_slots x capacity`` places): slots that would
+    need more than half of the machine's memory are refused with the size.
+    `slot_index` and `slot_grid` cut a long recording a stretch at a time, as
+    `spikejax.vision.detect.detect` does.
+
     Args:
         events: array in `EVENT_DTYPE` (from `read` or `normalize`).
         slot: slot length, seconds (> 0).
@@ -558,42 +723,12 @@ def to_slots(
     Returns:
         `Slots`, events batched with a leading slot axis.
     """
-    if not slot > 0:
-        raise UserError(f"slot length must be > 0 s, not {slot}")
     if capacity <= 0:
         raise UserError(f"capacity must be > 0, not {capacity}")
     t0 = _t0(events, t0)
-    seconds = (events["t"] - t0).astype(np.float64) * 1e-6
-    slot_us = slot * 1e6
-    if abs(slot_us - round(slot_us)) < 1e-6:
-        # Whole microseconds: integer division, so that an event stamped exactly
-        # on a boundary opens the next slot whatever the float rounding.
-        index = (events["t"] - t0) // int(round(slot_us))
-    else:
-        index = np.floor((events["t"] - t0) / slot_us).astype(np.int64)
+    index = slot_index(events, slot, t0)
     if n_slots is None:
         n_slots = int(index[-1]) + 1 if len(events) else 0
-    keep = (index >= 0) & (index < n_slots)
-    index, chosen = index[keep], np.flatnonzero(keep)
-    counts = np.bincount(index, minlength=n_slots)
-    first = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    rank = np.arange(len(index)) - first[index]
-    fits = rank < capacity
-    rows, cols, src = index[fits], rank[fits], chosen[fits]
-
-    def grid(values, dtype):
-        out = np.zeros((n_slots, capacity), dtype)
-        out[rows, cols] = values
-        return jnp.asarray(out)
-
-    valid = np.zeros((n_slots, capacity), bool)
-    valid[rows, cols] = True
-    batch = Events(
-        x=grid(events["x"][src], np.int32),
-        y=grid(events["y"][src], np.int32),
-        t=grid(seconds[src], np.float32),
-        p=grid(events["p"][src], np.int32),
-        valid=jnp.asarray(valid),
-    )
-    overflow = np.maximum(counts - capacity, 0)
+    lo, hi = np.searchsorted(index, [0, n_slots])
+    batch, overflow = slot_grid(events[lo:hi], index[lo:hi], capacity, n_slots, t0=t0)
     return Slots(batch, overflow, np.arange(n_slots) * slot, t0)

@@ -49,6 +49,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax.ranges import NON_NEGATIVE, POSITIVE, Range, ranged
+
 __all__ = [
     "BODY",
     "ENTRY",
@@ -383,14 +385,15 @@ def pipe_offset(distance, pos, center, focal):
     return distance * (pos - center) / focal
 
 
+@ranged(focal=POSITIVE, size=NON_NEGATIVE, speed=NON_NEGATIVE)
 class TrackParams(NamedTuple):
     """Parameters of Alg. 3 (traced; build them with `track_params`).
 
     Attributes:
         focal: ``f``, focal length, pixels.
         center: ``c``, the image centre column, pixels.
-        size: ``l``, the pipe's diameter, metres; 0 if unknown (then Eq. 9).
-        speed: ``v``, forward speed of the robot, m/s.
+        size: ``l``, the pipe's diameter, metres, >= 0; 0 if unknown (then Eq. 9).
+        speed: ``v``, forward speed of the robot, m/s, >= 0.
         swing_amplitude, swing_ratio, swing_phase: ``(A, alpha, phi_pos)`` of Eq. (6).
         omega: the gait's angular frequency, rad/s.
     """
@@ -405,6 +408,7 @@ class TrackParams(NamedTuple):
     omega: jax.Array
 
 
+@ranged(fov=Range(0, math.pi, low_open=True, high_open=True), width=Range(1, integer=True))
 def track_params(
     *,
     fov: float = math.radians(60.0),
@@ -416,7 +420,7 @@ def track_params(
     swing_phase: float = 0.0,
     omega: float = 1.0,
 ) -> TrackParams:
-    """`TrackParams` from the camera's field of view (rad) and width (pixels).
+    """`TrackParams` from the camera's field of view (rad, in ``(0, pi)``) and width (pixels).
 
     The paper's swing tuples ``(A, alpha, phi_pos)`` are ``(-0.124, 1.000,
     0.000)`` in V-REP and ``(1.400, 2.571, 0.908)`` in the NRP.

@@ -34,6 +34,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax.ranges import NON_NEGATIVE, POSITIVE, ranged
 from spikejax.vision.events import Events
 from spikejax.vision.hough.grids import Grid, LineGrid, check_grid, line_table, ring_offsets
 
@@ -54,12 +55,13 @@ __all__ = [
 ]
 
 
+@ranged(v_th=POSITIVE, decay=NON_NEGATIVE)
 class HoughParams(NamedTuple):
     """Parameters of the extended bipolar LIF neurons of Alg. 1.
 
     Attributes:
-        v_th: firing threshold, in votes (> 1: one vote alone never fires).
-        decay: the decay rate lambda of Alg. 1, votes per second.
+        v_th: firing threshold, in votes, > 0 (above 1, one vote alone never fires).
+        decay: the decay rate lambda of Alg. 1, votes per second, >= 0 (0: no leak).
     """
 
     v_th: jax.Array
