@@ -162,3 +162,30 @@ def test_cpu_devices_beyond_the_cores_warn_in_one_line():
         f"warning: {cores + 1} CPU devices asked for, but this machine has {cores} core{'s' * (cores > 1)}; "
         "the devices share them (no faster than one device per core)"
     ]
+
+
+def test_writes_output_checks_an_optional_out_before_the_run_and_keeps_the_signature(tmp_path):
+    import inspect
+
+    from spikejax.commands import writes_output
+    from spikejax.errors import UserError
+
+    calls = []
+
+    @writes_output("bench toy")
+    def run(*, out: str | None = None, trials: int | None = None) -> int:
+        calls.append(out)
+        (out / "table.csv").write_text("x\n") if out is not None else None
+        return 0
+
+    assert list(inspect.signature(run).parameters) == ["out", "trials"]
+    assert run(out=None, trials=1) == 0 and calls == [None]
+    assert run(out=str(tmp_path / "new"), trials=1) == 0
+    assert calls[-1] == tmp_path / "new" and (tmp_path / "new" / "table.csv").exists()
+    assert run(out=str(tmp_path / "new"), trials=1) == 0  # its own earlier output is used again
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(UserError, match="not an earlier output of spikejax bench toy"):
+        run(out=str(foreign), trials=1)
+    assert len(calls) == 3 and sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]

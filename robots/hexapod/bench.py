@@ -38,7 +38,7 @@ from spikejax.benchmarking import (
     machine_banner,
     write_csv,
 )
-from spikejax.commands import Command, count
+from spikejax.commands import Command, count, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 from spikejax.sweep import load_sweep, read_results, run_sweep, trial_key
@@ -199,6 +199,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+@writes_output("bench gaits")
 def run(
     *,
     trials: int | None = None,

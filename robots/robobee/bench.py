@@ -62,7 +62,7 @@ from spikejax.benchmarking import (
     machine_banner,
     write_csv,
 )
-from spikejax.commands import Command, count, positive_float
+from spikejax.commands import Command, count, positive_float, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 
@@ -516,6 +516,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+@writes_output("bench robobee", shared_with=("bench robobee-network",))
 def run(
     *,
     trials: int | None = None,

@@ -62,7 +62,7 @@ from spikejax.benchmarking import (
     plot_rows,
     write_csv,
 )
-from spikejax.commands import Command, count
+from spikejax.commands import Command, count, writes_output
 from spikejax.errors import UserError
 
 # The snake's modules are imported where they are used: they make JAX arrays when
@@ -314,6 +314,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+@writes_output("bench snake")
 def run(
     *,
     trials: int | None = None,

@@ -19,10 +19,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import functools
 import inspect
 import os
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 from spikejax.errors import UserError
 
@@ -35,6 +37,7 @@ __all__ = [
     "output_directory",
     "positive_float",
     "run_parameters",
+    "writes_output",
 ]
 
 MARKER = ".spikejax-output"
@@ -173,6 +176,27 @@ def _check_output(path: Path, command: str, flag: str, shared_with: Iterable[str
             f"the directory holds the output of spikejax {', '.join(wrote) or 'another command'}, "
             f"not of spikejax {command}; give a new or an empty directory",
         )
+
+
+def writes_output(command: str, *, shared_with: Iterable[str] = ()) -> Callable:
+    """Decorator of a command's run function whose ``out`` flag is optional: `output_directory` around it.
+
+    When ``out`` is given, it is checked before the run does any work and
+    handed to it as a `pathlib.Path`; the run's signature is kept (so its flags
+    still match, `run_parameters`).
+    """
+
+    def wrap(run: Callable[..., int | None]) -> Callable[..., int | None]:
+        @functools.wraps(run)
+        def checked(**flags: Any) -> int | None:
+            if flags.get("out") is None:
+                return run(**flags)
+            with output_directory(flags["out"], command=command, shared_with=shared_with) as out:
+                return run(**{**flags, "out": out})
+
+        return checked
+
+    return wrap
 
 
 @contextlib.contextmanager

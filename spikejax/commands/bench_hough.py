@@ -88,7 +88,7 @@ from spikejax.benchmarking import (
     plot_rows,
     write_csv,
 )
-from spikejax.commands import Command, count
+from spikejax.commands import Command, count, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
@@ -314,6 +314,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+@writes_output("bench hough")
 def run(
     *,
     trials: int | None = None,
