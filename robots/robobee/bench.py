@@ -38,19 +38,19 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import math
 from pathlib import Path
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from robots.robobee import bench_network
-from robots.robobee.controller import ControllerConfig, controller_params
-from robots.robobee.flight import flight_plan, fly
-from robots.robobee.lqr import altitude_params, lateral_gain
-from robots.robobee.params import randomize, robobee_params
+from robots.robobee.controller import ControllerConfig, ControllerParams, controller_params
+from robots.robobee.flight import FlightPlan, flight_plan, fly
+from robots.robobee.lqr import AltitudeParams, altitude_params, lateral_gain
+from robots.robobee.params import RoboBeeParams, randomize, robobee_params
 from robots.robobee.peers import RECORD_EVERY, Brian2FlightRun
 from spikejax.benchmarking import (
     JaxRun,
@@ -132,12 +132,13 @@ def flight_steps(duration: float, record_every: int = RECORD_EVERY) -> tuple[int
     hold = round(HOLD_FRACTION * blocks)
     segment = (blocks - hold) // 2
     if segment < 1:
-        raise ValueError(f"a flight of {duration} s is too short for a hold and two segments")
+        raise UserError(f"a flight of {duration} s is too short for a hold and two segments")
     return hold * record_every, segment * record_every
 
 
-class FlightSetup(NamedTuple):
-    """Everything a batch of flights shares or draws, as `fly` takes it.
+@dataclasses.dataclass(frozen=True, eq=False)
+class FlightSetup:
+    """Everything a batch of flights shares or draws, as `fly` takes it (a host-side bundle, never traced).
 
     Attributes:
         config: network sizes (static).
@@ -152,11 +153,11 @@ class FlightSetup(NamedTuple):
     """
 
     config: ControllerConfig
-    cparams: object
-    robots: object
+    cparams: ControllerParams
+    robots: RoboBeeParams
     K: jax.Array
-    altitude: object
-    plan: object
+    altitude: AltitudeParams
+    plan: FlightPlan
     keys: jax.Array
 
 

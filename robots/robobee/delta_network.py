@@ -76,6 +76,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from spikejax.errors import UserError
 from spikejax.neurons import LIFParams, LIFState, lif_init, lif_params, lif_step
 
 __all__ = [
@@ -279,7 +280,7 @@ def delta_network_params(spec: NetworkSpec, synapses: str = "dense", weight_dtyp
     elif synapses == "fanin":
         (idx_ih, w_ih), (idx_ho, w_ho) = _fanin(spec.conn_ih, spec.w_ih), _fanin(spec.conn_ho, spec.w_ho)
     else:
-        raise ValueError(f"synapses must be 'dense' or 'fanin', not {synapses!r}")
+        raise UserError(f"synapses must be 'dense' or 'fanin', not {synapses!r}")
     return DeltaNetworkParams(
         layers,
         jnp.asarray(w_ih, weight_dtype),
