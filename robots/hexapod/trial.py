@@ -1,4 +1,4 @@
-"""The gait-convergence trial that sweep files name: train one SCPG, report whether it converged."""
+"""The gait-convergence trial sweep files name: train one SCPG (hexapod SCPG paper, Alg. 1), report if it converged."""
 
 from __future__ import annotations
 
