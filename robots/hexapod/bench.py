@@ -38,7 +38,7 @@ from spikejax.benchmarking import (
     machine_banner,
     write_csv,
 )
-from spikejax.commands import Command, count, writes_output
+from spikejax.commands import Command, add_cpu_devices, count, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 from spikejax.sweep import load_sweep, read_results, run_sweep, trial_key
@@ -190,12 +190,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trials", type=count, default=None, help=f"trials to time (default {TARGET_TRIALS:,})")
     parser.add_argument("--out", default=None, help="write bench_gaits.csv here")
     parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 1)")
-    parser.add_argument(
-        "--cpu-devices",
-        type=count,
-        default=None,
-        help="CPU devices JAX presents (default: one per core); also the NumPy pool's processes",
-    )
+    add_cpu_devices(parser, peers="the NumPy pool's processes")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 

@@ -62,7 +62,7 @@ from spikejax.benchmarking import (
     machine_banner,
     write_csv,
 )
-from spikejax.commands import Command, count, positive_float, writes_output
+from spikejax.commands import Command, add_cpu_devices, count, positive_float, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 
@@ -508,12 +508,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         default=True,
         help="then run the network-alone table (default: yes)",
     )
-    parser.add_argument(
-        "--cpu-devices",
-        type=count,
-        default=None,
-        help="CPU devices JAX presents (default: one per core); also Brian2's processes",
-    )
+    add_cpu_devices(parser, peers="Brian2's processes")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 

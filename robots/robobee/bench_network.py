@@ -66,7 +66,7 @@ from spikejax.benchmarking import (
     machine_banner,
     write_csv,
 )
-from spikejax.commands import Command, count, positive_float, writes_output
+from spikejax.commands import Command, add_cpu_devices, count, positive_float, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 
@@ -175,12 +175,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 3)")
     parser.add_argument("--out", default=None, help="write bench_robobee_network.csv here")
-    parser.add_argument(
-        "--cpu-devices",
-        type=count,
-        default=None,
-        help="CPU devices JAX presents (default: one per core); also the peers' processes and threads",
-    )
+    add_cpu_devices(parser, peers="the peers' processes and threads")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 

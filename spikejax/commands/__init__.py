@@ -33,6 +33,7 @@ __all__ = [
     "Command",
     "OneLineParser",
     "add_common",
+    "add_cpu_devices",
     "count",
     "output_directory",
     "positive_float",
@@ -108,6 +109,21 @@ def positive_float(text: str) -> float:
     if not (value > 0 and value < float("inf")):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
     return value
+
+
+def add_cpu_devices(parser: argparse.ArgumentParser, *, peers: str) -> None:
+    """Declare a benchmark's ``--cpu-devices N``: the CPU devices JAX presents, and the cores the peers get.
+
+    Args:
+        parser: the command's parser.
+        peers: what else takes that many cores, for the help (``"the peers' processes"``).
+    """
+    parser.add_argument(
+        "--cpu-devices",
+        type=count,
+        default=None,
+        help=f"CPU devices JAX presents (default: one per core); also {peers}",
+    )
 
 
 def add_common(

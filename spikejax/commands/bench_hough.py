@@ -88,7 +88,7 @@ from spikejax.benchmarking import (
     plot_rows,
     write_csv,
 )
-from spikejax.commands import Command, count, writes_output
+from spikejax.commands import Command, add_cpu_devices, count, writes_output
 from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
@@ -305,12 +305,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", default=None, help="write hough.csv and hough.png here")
     parser.add_argument("--repeats", type=count, default=None, help="timed runs per row, the best kept (default 5)")
-    parser.add_argument(
-        "--cpu-devices",
-        type=count,
-        default=None,
-        help="CPU devices JAX presents (default: one per core); also the peers' processes",
-    )
+    add_cpu_devices(parser, peers="the peers' processes")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
