@@ -121,3 +121,50 @@ def test_target_angles_by_hand():
 def test_unknown_track_is_a_user_error():
     with pytest.raises(UserError, match="unknown track 'spiral'"):
         tracks.get("spiral")
+
+
+@pytest.mark.parametrize("base", ["eight", "ladder", "zigzag"])
+def test_drawn_tracks_end_where_their_units_do(base):
+    r = tracks.TURN_RADIUS
+    units = {
+        "eight": 4 * math.pi * r,
+        "ladder": tracks.LADDER_STEPS * (math.pi * r + 2.0 + 3.0),
+        "zigzag": tracks.ZIGZAG_PERIODS * (math.pi * r + 8.0),
+    }
+    assert tracks.drawn_length(base) == pytest.approx(tracks.LEAD_IN + units[base], rel=1e-5)
+    assert tracks.drawn_length(base + "-mirror") == pytest.approx(tracks.drawn_length(base), rel=1e-6)
+    # the drawn 8 closes on itself: its end is the crossing at the origin
+    if base == "eight":
+        np.testing.assert_allclose(tracks.point(tracks.get("eight", drawn=True), 1e6), [0.0, 0.0], atol=2e-3)
+
+
+def test_waypoints_are_placed_ahead_of_the_snake_along_their_first_segment():
+    # first segment along +y, then a right turn along +x: placed along +x, then turning right (to -y)
+    track = tracks.from_waypoints([[1.0, 1.0], [1.0, 3.0], [3.0, 3.0]])
+    spawn = np.array([tracks.START[0] + tracks.SPAWN_DISTANCE, 0.0])
+    np.testing.assert_allclose(tracks.point(track, 0.0), spawn, atol=1e-6)
+    np.testing.assert_allclose(tracks.point(track, 2.0), spawn + [2.0, 0.0], atol=1e-5)
+    np.testing.assert_allclose(tracks.point(track, 3.0), spawn + [2.0, -1.0], atol=1e-5)
+    assert float(track.length) == pytest.approx(4.0)
+    assert float(tracks.heading(track, 3.0)) == pytest.approx(-math.pi / 2, abs=1e-6)
+
+
+def test_waypoint_files_read_and_bad_ones_get_one_line_errors(tmp_path):
+    good = tmp_path / "t.csv"
+    good.write_text("x,y\n0,0\n2,0\n2,2\n")
+    assert float(tracks.load_waypoints(good).length) == pytest.approx(4.0)
+    cases = {
+        "x,y\n0,0\n": "at least two",
+        "x,y\n0,0\n1,a\n": "line 3",
+        "0,0,1\n1,1,1\n": "two columns",
+        "0,0\n0,0\n1,1\n": "coincide",
+        "0,0\nnan,1\n": "finite",
+    }
+    for i, (text, words) in enumerate(cases.items()):
+        bad = tmp_path / f"bad{i}.csv"
+        bad.write_text(text)
+        with pytest.raises(UserError, match=words) as e:
+            tracks.load_waypoints(bad)
+        assert "\n" not in str(e.value) and str(bad) in str(e.value)
+    with pytest.raises(UserError, match="cannot read"):
+        tracks.load_waypoints(tmp_path / "missing.csv")

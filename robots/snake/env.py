@@ -31,22 +31,29 @@ Spaces:
   They live in ``info`` rather than ``obs`` because an event buffer is not a
   flat vector; the SNN controllers read them from there. ``info["frame"]`` is
   the camera's last grey-level frame (the reference for the next step's
-  events).
+  events) and ``info["prev_frame"]`` the one before, so that an encoder can
+  count the step's events from the dense difference image
+  (`spikejax.coding.grid_counts`); ``compact_events=False`` then skips
+  building the event buffer (``info["events"]`` stays empty).
 * ``reward = -|a_head|``: the head should face the target.
 * ``info["params"]``: the episode's `SnakeEnvParams` (``max_steer``,
   ``max_head_offset``, ``target_speed``, ``event_threshold``), traced, so that
   a sweep vmaps over them with one compiled program; the constructor's values
   unless ``reset(rng, params=...)`` was given others.
 * ``done = 1`` when the target is lost, the paper's reset rule (section III-B):
-  ``|a_head| > 40`` degrees, or the mean of ``a_body`` over the last gait
-  period beyond 35 degrees (the paper's 625-step window is "a movement period
-  of the snake robot").
+  ``|a_head| > 40`` degrees, or the mean of ``a_body`` over the last
+  ``body_window`` control steps beyond 35 degrees. The paper's window is 625
+  steps, "a movement period of the snake robot"; this gait's period is 125
+  steps, the default (``body_window=625`` gives the paper's).
+* ``info["completed"]``: the target has reached the end of its track, the
+  episode is complete (only tracks with an end, ``drawn=True`` or waypoints,
+  ever complete).
 
 Eq. (12), ``a_body = a_head - d_head``, takes ``d_head`` positive when the head
 is turned left; the head offset here is positive to the right, so
 ``d_head = -head_offset``.
 
-The track is static (``track=``); ``reset(rng, mirror=...)`` mirrors it about
+The track is static (``track=``, a name or a `robots.snake.tracks.Track`); ``reset(rng, mirror=...)`` mirrors it about
 the x axis, which is how the training track alternates direction each episode
 (`robots.snake.tracks.training_mirror`). A ``step`` from a state at time
 0 starts the episode afresh (target at the start, no events, empty angle
@@ -105,7 +112,12 @@ class SnakeEnv(Env):
     """Follow the target sphere along a track with the slithering snake (see the module docstring).
 
     Args:
-        track: one of `robots.snake.tracks.TRACKS`.
+        track: one of `robots.snake.tracks.TRACKS`, or a `robots.snake.tracks.Track`
+            (e.g. `robots.snake.tracks.load_waypoints`).
+        drawn: a named track as drawn in Fig. 5, with an end (`robots.snake.tracks.get`),
+            rather than endless.
+        body_window: control steps of the failure rule's mean body angle;
+            default one gait period (the paper: 625).
         backend: physics backend, ``"mujoco"`` (MuJoCo C, the choice on a CPU) or ``"mjx"``.
         camera: render the head camera and emit events each step; ``False``
             leaves ``info["events"]`` empty (for controllers that only read the
@@ -113,6 +125,8 @@ class SnakeEnv(Env):
         event_threshold: frame-difference threshold on grey levels in (0, 1]
             (the default of `SnakeEnvParams`, as are the next three).
         event_capacity: event slots per control step.
+        compact_events: build ``info["events"]`` each step; ``False`` for
+            controllers that read the frames (faster).
         target_speed: the target's speed along the track, m/s; "a little faster
             than the snake" (section II-A): 1.2 times its straight speed.
         max_steer: ``C_o`` at full action, rad.
@@ -125,12 +139,15 @@ class SnakeEnv(Env):
 
     def __init__(
         self,
-        track: str = "eight",
+        track: str | tracks.Track = "eight",
         backend: str = "mujoco",
         *,
+        drawn: bool = False,
+        body_window: int | None = None,
         camera: bool = True,
         event_threshold: float = 0.05,
         event_capacity: int = 2048,
+        compact_events: bool = True,
         target_speed: float = 1.2 * SNAKE_SPEED,
         max_steer: float = 0.25,
         max_head_offset: float = 0.5,
@@ -145,19 +162,27 @@ class SnakeEnv(Env):
             raise UserError(f"event_threshold must be positive, got {event_threshold}")
         if not target_speed > 0:
             raise UserError(f"target_speed must be positive, got {target_speed}")
-        self._track = tracks.get(track)  # raises UserError for an unknown name
-        self.track_name = track
+        if isinstance(track, tracks.Track):
+            self._track, self.track_name = track, "waypoints"
+        else:
+            self._track = tracks.get(track, drawn=drawn)  # raises UserError for an unknown name
+            self.track_name = track
         self.physics = make_physics(backend, **physics_kwargs)
         self._joints = np.asarray(joint_qpos_index(self.physics.mj_model))
         self.camera_on = bool(camera)
         self.event_capacity = int(event_capacity)
+        self.compact_events = bool(compact_events)
         self.params = SnakeEnvParams(
             *(jnp.asarray(x, jnp.float32) for x in (max_steer, max_head_offset, target_speed, event_threshold))
         )
         self.compensate = bool(compensate)
         self.gait = gait_params() if gait is None else gait
         self.pipes = pipes
-        self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
+        if body_window is None:
+            body_window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
+        if isinstance(body_window, bool) or not isinstance(body_window, int) or body_window < 1:
+            raise UserError(f"body_window must be a whole number of control steps >= 1, got {body_window!r}")
+        self.window = body_window
         head0 = np.asarray(self.physics.init().head_pos[:2])
         self.origin = jnp.asarray(head0 - np.asarray(tracks.START), jnp.float32)  # track frame -> world frame
 
@@ -200,12 +225,14 @@ class SnakeEnv(Env):
             "target_s": zero,
             "target_xy": target_xy,
             "frame": frame,
+            "prev_frame": frame,
             "events": dvs.frame_difference(
                 frame, frame, phys.time, threshold=params.event_threshold, capacity=self.event_capacity
             )[0],
             "overflow": jnp.zeros((), jnp.int32),
             "body_angles": jnp.zeros((self.window,), jnp.float32),
             "control_steps": jnp.zeros((), jnp.int32),
+            "completed": jnp.zeros((), bool),
         }
         return State(
             pipeline_state=phys,
@@ -238,8 +265,8 @@ class SnakeEnv(Env):
         target_xy = self._target_xy(target_s, mirror)
         a_head, a_body = self._angles(phys, target_xy, -head_offset)
         frame = self._frame(phys, target_xy)
-        if self.camera_on:
-            previous = jnp.where(fresh, frame, info["frame"])
+        previous = jnp.where(fresh, frame, info["frame"])
+        if self.camera_on and self.compact_events:
             events, overflow = dvs.frame_difference(
                 previous, frame, phys.time, threshold=params.event_threshold, capacity=self.event_capacity
             )
@@ -250,10 +277,12 @@ class SnakeEnv(Env):
             target_s=target_s,
             target_xy=target_xy,
             frame=frame,
+            prev_frame=previous,
             events=events,
             overflow=overflow,
             body_angles=body_angles,
             control_steps=info["control_steps"] + 1,
+            completed=target_s >= track.length,
         )
         lost = (jnp.abs(a_head) > LOST_HEAD_ANGLE) | (jnp.abs(jnp.mean(body_angles)) > LOST_BODY_ANGLE)
         return state.replace(
@@ -264,6 +293,15 @@ class SnakeEnv(Env):
             metrics=self._metrics(phys, target_xy, a_head, a_body, info),
             info=info,
         )
+
+    def restart(self, initial: State, state: State, mirror) -> State:
+        """``initial`` (a state from `reset`) with ``state``'s params and the given mirror: a new episode.
+
+        No rendering: ``initial`` is computed once, so an in-graph reset of
+        one member of a batch costs a selection, not a second camera frame.
+        """
+        info = dict(initial.info, params=state.info["params"], mirror=jnp.asarray(mirror, bool), rng=state.info["rng"])
+        return initial.replace(info=info)
 
     # ------------------------------------------------------------ parts
 
@@ -305,7 +343,7 @@ def rollout(env: SnakeEnv, policy, policy_state, steps: int, mirror=False, *, pa
     reset's ``rng``, default ``jax.random.PRNGKey(0)``) are passed to ``env.reset``.
 
     ``policy(policy_state, obs, state) -> (policy_state, action)``. Returns the
-    stacked per-step `brax.envs.base.State` (without ``info["frame"]``, to keep the
+    stacked per-step `brax.envs.base.State` (without the frames, to keep the
     record small) and the final state. The rollout continues after ``done``;
     ``done`` marks the steps where the target counted as lost.
     """
@@ -316,7 +354,7 @@ def rollout(env: SnakeEnv, policy, policy_state, steps: int, mirror=False, *, pa
         state, pstate = carry
         pstate, action = policy(pstate, state.obs, state)
         state = env.step(state, action)
-        record = state.replace(info={k: v for k, v in state.info.items() if k != "frame"})
+        record = state.replace(info={k: v for k, v in state.info.items() if k not in ("frame", "prev_frame")})
         return (state, pstate), record
 
     (final, _), record = jax.lax.scan(body, (state, policy_state), None, length=steps)

@@ -21,6 +21,18 @@ radius `TURN_RADIUS`:
 
 The mirror image of a track is ``(x, y) -> (x, -y)``.
 
+Each track comes in two lengths: endless (built to at least `TRACK_LENGTH`,
+the target never runs out of track) and as drawn (``drawn=True``: one 8, the
+ladder's `LADDER_STEPS` steps, the zigzag's `ZIGZAG_PERIODS` periods), which has
+an end, so that an episode can be completed: the R-STDP training's episode is
+one traversal of the drawn 8 (section III of the paper), and a test is one pass
+of a drawn test track. Fig. 5 has no scale; the drawn lengths are this
+project's choice (`drawn_length` gives them).
+
+Any other track can be given as waypoints (`from_waypoints`, `load_waypoints`):
+a polyline placed so that the snake starts `SPAWN_DISTANCE` behind its first
+waypoint, facing along its first segment.
+
 The target moves along its track "a little faster than the snake robot, but
 not further away from the snake robot than the initial distance": each control
 step it advances by ``speed * dt`` unless that would take it farther than the
@@ -43,7 +55,9 @@ SPAWN_DISTANCE = 1.6  # the target starts this far in front of the head (section
 TARGET_RADIUS = 0.3  # the target sphere (section II-A)
 TURN_RADIUS = 2.5  # every arc of every track; Fig. 5 has no scale, chosen within the snake's turning range
 LEAD_IN = -START[0] - SPAWN_DISTANCE  # straight from the spawn point (-3.4, 0) to the origin
-TRACK_LENGTH = 1000.0  # each track is built at least this long; the target stops at its end
+TRACK_LENGTH = 1000.0  # each endless track is built at least this long; the target stops at its end
+LADDER_STEPS = 2  # steps of the drawn ladder (Fig. 5b has no scale: this project's choice)
+ZIGZAG_PERIODS = 1  # periods (one leg up, one leg down) of the drawn zigzag (Fig. 5c, likewise)
 
 TRACKS = ("eight", "eight-mirror", "ladder", "ladder-mirror", "zigzag", "zigzag-mirror")
 
@@ -90,31 +104,108 @@ def _chord(th, kappa, ds):
     return np.array([math.sin(th + kappa * ds) - math.sin(th), math.cos(th) - math.cos(th + kappa * ds)]) / kappa
 
 
-def _repeat(unit, length):
-    n = math.ceil(length / sum(seg[0] for seg in unit))
-    return list(unit) * n
+def _repeat(unit, units):
+    """``unit`` repeated ``units`` times, or (``units=None``) until at least `TRACK_LENGTH` long."""
+    if units is None:
+        units = math.ceil(TRACK_LENGTH / sum(seg[0] for seg in unit))
+    return list(unit) * units
 
 
-def eight(radius: float = TURN_RADIUS) -> Track:
-    """Fig. 5(a): lead-in, then a counter-clockwise lobe above the x axis and a clockwise one below, repeated."""
+def _with_lead_in(segments) -> Track:
+    return from_segments((-LEAD_IN, 0.0), 0.0, [(LEAD_IN, 0.0)] + segments)
+
+
+def eight(radius: float = TURN_RADIUS, units: int | None = None) -> Track:
+    """Fig. 5(a): lead-in, then a counter-clockwise lobe above the x axis and a clockwise one below.
+
+    ``units`` 8s follow the lead-in (``None``: endless, `TRACK_LENGTH`); the drawn 8 is ``units=1``.
+    """
     lobe = 2.0 * math.pi * radius
-    return from_segments(
-        (-LEAD_IN, 0.0), 0.0, [(LEAD_IN, 0.0)] + _repeat([(lobe, 1.0 / radius), (lobe, -1.0 / radius)], TRACK_LENGTH)
-    )
+    return _with_lead_in(_repeat([(lobe, 1.0 / radius), (lobe, -1.0 / radius)], units))
 
 
-def ladder(radius: float = TURN_RADIUS, rung: float = 2.0, run: float = 3.0) -> Track:
-    """Fig. 5(b): lead-in, then steps climbing to the left: quarter turn left, rung, quarter turn right, run."""
+def ladder(radius: float = TURN_RADIUS, rung: float = 2.0, run: float = 3.0, units: int | None = None) -> Track:
+    """Fig. 5(b): lead-in, then ``units`` steps climbing to the left: quarter turn left, rung, quarter turn right, run."""
     quarter = 0.5 * math.pi * radius
-    unit = [(quarter, 1.0 / radius), (rung, 0.0), (quarter, -1.0 / radius), (run, 0.0)]
-    return from_segments((-LEAD_IN, 0.0), 0.0, [(LEAD_IN, 0.0)] + _repeat(unit, TRACK_LENGTH))
+    return _with_lead_in(_repeat([(quarter, 1.0 / radius), (rung, 0.0), (quarter, -1.0 / radius), (run, 0.0)], units))
 
 
-def zigzag(radius: float = TURN_RADIUS, leg: float = 4.0) -> Track:
-    """Fig. 5(c): lead-in, then legs at +45 and -45 degrees to the x axis joined by arcs."""
+def zigzag(radius: float = TURN_RADIUS, leg: float = 4.0, units: int | None = None) -> Track:
+    """Fig. 5(c): lead-in, then ``units`` periods of legs at +45 and -45 degrees to the x axis joined by arcs."""
     eighth = 0.25 * math.pi * radius
     unit = [(eighth, 1.0 / radius), (leg, 0.0), (2 * eighth, -1.0 / radius), (leg, 0.0), (eighth, 1.0 / radius)]
-    return from_segments((-LEAD_IN, 0.0), 0.0, [(LEAD_IN, 0.0)] + _repeat(unit, TRACK_LENGTH))
+    return _with_lead_in(_repeat(unit, units))
+
+
+DRAWN_UNITS = {"eight": 1, "ladder": LADDER_STEPS, "zigzag": ZIGZAG_PERIODS}
+
+
+def from_waypoints(xy) -> Track:
+    """A polyline through waypoints ``xy`` (k, 2), in metres, placed where the snake starts.
+
+    The polyline is moved rigidly so that its first waypoint is the target's
+    spawn point, `SPAWN_DISTANCE` in front of the snake's start `START`, and
+    its first segment points along +x, the snake's initial heading: the snake
+    starts 1.6 m behind the first waypoint, facing along the first segment.
+    Each segment is straight; the target turns at the waypoints.
+
+    Raises:
+        UserError: for fewer than two waypoints, non-finite values, or two
+            consecutive waypoints closer than 1 mm.
+    """
+    xy = np.asarray(xy, float)
+    if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 2:
+        raise UserError(f"a track needs at least two (x, y) waypoints, got an array of shape {xy.shape}")
+    if not np.all(np.isfinite(xy)):
+        raise UserError("track waypoints must be finite numbers")
+    d = np.diff(xy, axis=0)
+    lengths = np.hypot(d[:, 0], d[:, 1])
+    if np.any(lengths < 1e-3):
+        k = int(np.argmax(lengths < 1e-3))
+        raise UserError(f"track waypoints {k + 1} and {k + 2} coincide (closer than 1 mm)")
+    angles = np.arctan2(d[:, 1], d[:, 0])
+    turns = np.concatenate([[0.0], np.angle(np.exp(1j * np.diff(angles)))])
+    headings = np.cumsum(turns)  # first segment along +x
+    spawn = np.array([START[0] + SPAWN_DISTANCE, START[1]])
+    p = spawn.copy()
+    starts = []
+    for length, th in zip(lengths, headings):
+        starts.append(p.copy())
+        p = p + length * np.array([math.cos(th), math.sin(th)])
+    s0 = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
+    f = lambda a: jnp.asarray(np.asarray(a), jnp.float32)  # noqa: E731
+    return Track(f(s0), f(starts), f(headings), f(np.zeros_like(lengths)), f(lengths.sum()))
+
+
+def load_waypoints(path) -> Track:
+    """`from_waypoints` of a CSV file of ``x, y`` rows in metres (an optional header line ``x,y``).
+
+    Raises:
+        UserError: naming the file (and the line) when it cannot be read as waypoints.
+    """
+    import csv
+
+    rows = []
+    try:
+        with open(path, newline="") as f:
+            for line, row in enumerate(csv.reader(f), start=1):
+                cells = [c.strip() for c in row]
+                if not cells or all(c == "" for c in cells) or cells[0].startswith("#"):
+                    continue
+                if line == 1 and [c.lower() for c in cells] == ["x", "y"]:
+                    continue
+                if len(cells) != 2:
+                    raise UserError(f"{path}: line {line}: expected two columns x, y, got {len(cells)}")
+                try:
+                    rows.append((float(cells[0]), float(cells[1])))
+                except ValueError:
+                    raise UserError(f"{path}: line {line}: {','.join(cells)!r} is not two numbers x, y") from None
+    except OSError as e:
+        raise UserError(f"cannot read track file {path}: {e.strerror or e}") from None
+    try:
+        return from_waypoints(np.asarray(rows, float).reshape(-1, 2))
+    except UserError as e:
+        raise UserError(f"{path}: {e}") from None
 
 
 def mirror(track: Track) -> Track:
@@ -124,14 +215,19 @@ def mirror(track: Track) -> Track:
     )
 
 
-def get(name: str) -> Track:
-    """A track by name, one of `TRACKS`."""
+def get(name: str, drawn: bool = False) -> Track:
+    """A track by name, one of `TRACKS`: endless, or as drawn (``drawn=True``, with an end)."""
     base, _, mirrored = name.partition("-")
     builders = {"eight": eight, "ladder": ladder, "zigzag": zigzag}
     if base not in builders or mirrored not in ("", "mirror"):
         raise UserError(f"unknown track {name!r}; choose one of {', '.join(TRACKS)}")
-    track = builders[base]()
+    track = builders[base](units=DRAWN_UNITS[base] if drawn else None)
     return mirror(track) if mirrored else track
+
+
+def drawn_length(name: str) -> float:
+    """Arc length of the drawn track ``name``, m."""
+    return float(get(name, drawn=True).length)
 
 
 def training_mirror(episode):
@@ -139,9 +235,10 @@ def training_mirror(episode):
     return episode % 2 == 1
 
 
-def training_track(episode: int) -> Track:
+def training_track(episode: int, drawn: bool = False) -> Track:
     """The 8 of episode ``episode``: as drawn for even episodes, mirrored for odd ones (Fig. 5 caption)."""
-    return mirror(eight()) if training_mirror(episode) else eight()
+    track = eight(units=1 if drawn else None)
+    return mirror(track) if training_mirror(episode) else track
 
 
 def _segment(track: Track, s):
