@@ -36,6 +36,7 @@ import contextlib
 import itertools
 import operator
 import os
+import zipfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, BinaryIO, NamedTuple
@@ -335,7 +336,8 @@ class _Chunks:
     def records(self) -> Any:
         if self.treedef is None:
             return None
-        return jax.tree.unflatten(self.treedef, [_from_host(d, i) for d, i in zip(self.joined(), self.impls)])
+        leaves = [_from_host(data, impl) if impl else data for data, impl in zip(self.joined(), self.impls)]
+        return jax.tree.unflatten(self.treedef, leaves)
 
 
 def _normal_axis(record_axis: int, records: Any) -> int:
@@ -370,6 +372,24 @@ def _save(path: Path, fingerprint: str, done: int, total: int, chunk_steps: int,
         np.savez(file, **arrays)
 
 
+def _saved_leaf(saved: Mapping[str, np.ndarray], name: str) -> jax.Array | None:
+    """The array saved as ``name``, a PRNG key array again if it was one (None: missing or unreadable)."""
+    if name not in saved or f"{name}_impl" not in saved:
+        return None
+    try:
+        return _from_host(saved[name], str(saved[f"{name}_impl"]))
+    except (TypeError, ValueError):
+        return None
+
+
+def _held(saved: Mapping[str, np.ndarray], name: str, value: jax.Array | None) -> str:
+    if value is not None:
+        return _described(value)[0]
+    if name in saved:
+        return f"{saved[name].dtype}{list(saved[name].shape)} (unreadable)"
+    return "nothing"
+
+
 def _load(
     path: Path,
     fingerprint: str,
@@ -384,10 +404,13 @@ def _load(
     try:
         with np.load(path, allow_pickle=False) as data:
             saved = {name: data[name] for name in data.files}
-    except (OSError, ValueError) as err:
-        raise UserError(f"cannot read the checkpoint {path}: {err}") from None
-    if int(saved.get("format", -1)) != _FORMAT:
-        raise UserError(f"{path} is not a checkpoint of spikejax.rollout.run_chunked (format {_FORMAT})")
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise UserError(f"cannot read the checkpoint {path} ({err}): delete it to start over") from None
+    missing = {"format", "fingerprint", "done_steps", "record_axis"} - set(saved)
+    if missing or int(saved["format"]) != _FORMAT:
+        raise UserError(
+            f"{path} is not a checkpoint of spikejax.rollout.run_chunked (format {_FORMAT}): delete it to start over"
+        )
     there = str(saved["fingerprint"])
     if there != fingerprint:
         raise UserError(
@@ -405,22 +428,14 @@ def _load(
     if n_saved != len(leaves):
         raise UserError(f"{where} holds a carry of {n_saved} arrays, this run's carry has {len(leaves)}")
     carry = []
-    for i, leaf in enumerate(leaves):
-        data, impl = saved[f"carry_{i}"], str(saved[f"carry_{i}_impl"])
-        want_data, want_impl = (
-            (jax.eval_shape(jax.random.key_data, leaf), str(jax.random.key_impl(leaf))) if _is_key(leaf) else (leaf, "")
-        )
-        if (
-            impl != want_impl
-            or data.shape != jnp.shape(want_data)
-            or np.dtype(data.dtype) != jnp.result_type(want_data)
-        ):
-            held = f"{impl or data.dtype}{list(data.shape)}"
+    for i, (path_in, leaf) in enumerate(jax.tree_util.tree_leaves_with_path(template)):
+        value = _saved_leaf(saved, f"carry_{i}")
+        if value is None or value.shape != jnp.shape(leaf) or value.dtype != jnp.result_type(leaf):
             raise UserError(
-                f"{where} holds carry leaf {jax.tree_util.keystr(jax.tree_util.tree_leaves_with_path(template)[i][0])} "
-                f"as {held}, this run's carry has {_described(leaf)[0]}"
+                f"{where} holds carry leaf {jax.tree_util.keystr(path_in)} as {_held(saved, f'carry_{i}', value)}, "
+                f"this run's carry has {_described(leaf)[0]}"
             )
-        carry.append(_from_host(data, impl))
+        carry.append(value)
 
     shapes, records_def = jax.tree.flatten(records_shape())
     if int(saved["record_axis"]) != chunks.axis:
@@ -434,19 +449,19 @@ def _load(
     chunks.treedef = records_def
     chunks.leaves, chunks.impls = [], []
     for i, shape in enumerate(shapes):
-        data, impl = saved[f"records_{i}"], str(saved[f"records_{i}_impl"])
-        want_impl = str(jax.random.key_impl(shape)) if _is_key(shape) else ""
-        ndim = len(shape.shape)
-        want = tuple(s for a, s in enumerate(shape.shape) if a != chunks.axis)
-        got = tuple(s for a, s in enumerate(data.shape[:ndim]) if a != chunks.axis)
-        dtype = np.dtype(np.uint32) if want_impl else np.dtype(shape.dtype)
-        if impl != want_impl or data.ndim < ndim or got != want or (not impl and data.dtype != dtype):
+        value = _saved_leaf(saved, f"records_{i}")
+        if (
+            value is None
+            or value.dtype != shape.dtype
+            or value.ndim != len(shape.shape)
+            or any(a != b for axis, (a, b) in enumerate(zip(value.shape, shape.shape)) if axis != chunks.axis)
+        ):
             raise UserError(
-                f"{where} holds records of other shapes than this run makes "
-                f"(record {i}: {impl or data.dtype}{list(data.shape)}, a chunk makes {_described(shape)[0]})"
+                f"{where} holds records of other shapes than this run makes (record {i}: "
+                f"{_held(saved, f'records_{i}', value)}, a chunk makes {_described(shape)[0]})"
             )
-        chunks.leaves.append([data])
-        chunks.impls.append(impl)
+        chunks.leaves.append([saved[f"records_{i}"]])
+        chunks.impls.append(str(saved[f"records_{i}_impl"]))
     return done, jax.tree.unflatten(treedef, carry)
 
 

@@ -100,7 +100,7 @@ def summarize(loop, out, env):
 
 
 def snapshot(loop):
-    return {"w": loop.controller.w, "steps": loop.steps}
+    return {"w": loop.controller.w, "steps": loop.steps, "key": loop.key}
 
 
 @functools.partial(jax.jit, static_argnames=("steps", "every", "summary"))
@@ -276,6 +276,7 @@ def test_chunked_equals_unchunked():
     assert_trees_equal(got, expected)
     assert seen == [(0, TOTAL), (6, TOTAL), (12, TOTAL), (18, TOTAL), (24, TOTAL)]
     assert got[1]["failures"].shape == (4, TOTAL // EVERY)
+    assert isinstance(got[1]["mean"]["x"], np.ndarray) and got[1]["snapshot"]["key"].dtype == jax.random.key(0).dtype
 
 
 class Killed(Exception):
@@ -342,8 +343,17 @@ def test_another_carry_is_refused(tmp_path):
         ro.run_chunked(_advance, smaller, TOTAL, CHUNK, directory=tmp_path, record_axis=1)
 
 
+def test_a_garbled_checkpoint_is_refused(tmp_path):
+    (tmp_path / ro.CHECKPOINT).write_bytes(b"PK\x03\x04 not a zip")
+    with pytest.raises(UserError, match="cannot read the checkpoint"):
+        ro.run_chunked(_advance, _carry(), TOTAL, CHUNK, directory=tmp_path, record_axis=1)
+
+
 def test_checkpoint_write_is_atomic(tmp_path, monkeypatch):
+    stale = tmp_path / f".{ro.CHECKPOINT}.999.0.tmp"  # left by a run killed while writing
+    stale.write_bytes(b"half a checkpoint")
     ro.run_chunked(_advance, _carry(), CHUNK, CHUNK, directory=tmp_path, record_axis=1)
+    assert not stale.exists()
     before = (tmp_path / ro.CHECKPOINT).read_bytes()
     real_savez = np.savez
 
