@@ -68,8 +68,8 @@ def backprop_rewards(r_next: jax.Array, weights: jax.Array, mask: jax.Array | No
 
     Each weight is normalised first, ``u_jk = w_jk / (max_k |w_jk| Y_j)``, then
     ``r_j = sum_k u_jk r_k``: the same quantity, but a lone synapse has
-    ``u = sign(w)`` exactly, so Eq. (13) is this function with a one-synapse mask
-    bit for bit, and tiny weights do not underflow.
+    ``u = sign(w)`` exactly, so Eq. (13) (`separated_rewards`) is this function
+    with a one-synapse mask bit for bit, and tiny weights do not underflow.
 
     Args:
         r_next: rewards of the next layer, shape ``(Y,)``.
@@ -109,9 +109,11 @@ def backprop_rewards(r_next: jax.Array, weights: jax.Array, mask: jax.Array | No
     w = jnp.where(mask, weights, zero)
     largest = jnp.max(jnp.abs(w), axis=1, initial=zero)
     n_synapses = jnp.sum(mask, axis=1).astype(dtype)
-    scale = largest * n_synapses
-    defined = scale > 0
-    u = w / jnp.where(defined, scale, 1)[:, None]
+    defined = (largest > 0) & (n_synapses > 0)
+    # XLA turns a division by a broadcast into a product with its reciprocal, which is off by an ulp; taking
+    # sign(w) outright where |w| is the largest keeps a lone synapse at exactly sign(w).
+    ratio = jnp.where(jnp.abs(w) == largest[:, None], jnp.sign(w), w / jnp.where(defined, largest, 1)[:, None])
+    u = ratio / jnp.where(defined, n_synapses, 1)[:, None]
     votes = jnp.where(mask & defined[:, None], u * r_next[None, :], zero)
     return jnp.sum(votes, axis=1)
 
