@@ -111,3 +111,32 @@ def test_direction_step_eq5_clips_and_scales_with_eta():
     assert path == [0.25, 0.5, 0.75, 1.0, 1.0, 1.0]
     # From a clipped state, the opposite intention moves it back at once.
     assert float(step(jnp.float32(1.0), jnp.float32(-1.0), jnp.float32(0.25))) == 0.75
+
+
+def test_poisson_counts_match_nest_poisson_generator():
+    # NEST's poisson_generator sends each target an independent Poisson count per step as one spike of that
+    # multiplicity; a parrot_neuron repeats it and the spike_recorder logs one entry per repeated spike.
+    nest = pytest.importorskip("nest")
+    nest.set_verbosity("M_ERROR")
+    nest.ResetKernel()
+    rate, dt, n = 4000.0, 1e-3, 2000
+    nest.SetKernelStatus({"resolution": dt * 1e3, "rng_seed": 12})
+    generator = nest.Create("poisson_generator", params={"rate": rate})
+    parrots = nest.Create("parrot_neuron", n)
+    recorder = nest.Create("spike_recorder")
+    nest.Connect(generator, parrots, syn_spec={"delay": 1.0})
+    nest.Connect(parrots, recorder)
+    nest.Simulate(51.0)
+    events = recorder.get("events")
+    senders, times = np.asarray(events["senders"]), np.round(np.asarray(events["times"])).astype(int)
+    steps = np.unique(times)
+    table = np.zeros((n, steps.size), np.int64)
+    np.add.at(table, (senders - senders.min(), np.searchsorted(steps, times)), 1)
+    ours = np.asarray(poisson_counts(jnp.full(table.size, rate), dt, key=jax.random.key(8)))
+    lam, size = rate * dt, table.size
+    for counts in (table.ravel(), ours):
+        assert abs(counts.mean() - lam) < N_SE * math.sqrt(lam / size)
+        assert abs(counts.var(ddof=1) - lam) < N_SE * math.sqrt((lam + 2 * lam**2) / size)
+        for p, observed in ((math.exp(-lam), np.mean(counts == 0)), (math.exp(-lam) * lam, np.mean(counts == 1))):
+            assert abs(observed - p) < N_SE * math.sqrt(p * (1 - p) / size)
+    assert table.max() > 1  # multiplicity, not a Bernoulli spike
