@@ -1,4 +1,4 @@
-"""Encoders that turn continuous signals into spikes, and the pre-processing before them.
+"""Encoders that turn continuous signals into spikes, the pre-processing before them, and decoders.
 
 Every function is written for one population (no batch axis: ``jax.vmap`` adds it)
 and takes an explicit ``jax.random`` key where it is stochastic, keyword-only and
@@ -7,19 +7,30 @@ last (``*, key``).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from spikejax.errors import UserError
+
+if TYPE_CHECKING:
+    from spikejax.vision.events import Events
 
 __all__ = [
     "DecoderParams",
     "DecoderState",
     "antagonist_currents",
+    "antagonist_rates",
+    "d_norm",
     "decoder_init",
     "decoder_step",
+    "direction_step",
+    "event_grid_counts",
+    "grid_counts",
+    "grid_rates",
+    "poisson_counts",
     "poisson_spikes",
     "poisson_train",
     "shift_scale",
@@ -247,3 +258,272 @@ def decoder_step(params: DecoderParams, state: DecoderState, spikes: jax.Array, 
     decay = jnp.exp(-params.beta * dt)
     trace = (decay * (state.trace + n)).astype(state.trace.dtype)
     return DecoderState(trace=trace), params.alpha * trace - params.gamma
+
+
+def poisson_counts(rates: jax.Array, dt, *, key: jax.Array) -> jax.Array:
+    """One time step of independent Poisson generators that may fire several times a step.
+
+    NEST's ``poisson_generator`` draws, for each target and each step of length
+    ``dt``, an independent Poisson number of spikes of mean ``rate dt`` and sends
+    them as one spike of that multiplicity. The snake R-STDP paper drives its
+    input neurons with such generators (Section II-B, D). Unlike
+    `poisson_spikes`, which says only whether a step holds at least one event,
+    this keeps the count, so the expected count over a window of length ``T``
+    is exactly ``rate T`` at any rate (a cell of Eq. (2) of the snake R-STDP
+    paper with ``N`` events then gets ``N`` spikes on average per control step).
+
+    Args:
+        rates: rates, Hz, any shape; negative rates are treated as 0.
+        dt: step length, s (scalar, may be traced).
+        key: PRNG key, used once.
+
+    Returns:
+        Counts, int32, the shape of ``rates``: Poisson with mean ``max(rate, 0) dt``.
+
+    Examples:
+        >>> n = poisson_counts(jnp.array([0.0, 5e4]), 1e-3, key=jax.random.key(0))
+        >>> n.dtype, int(n[0])
+        (dtype('int32'), 0)
+    """
+    rates = jnp.asarray(rates)
+    dtype = rates.dtype if jnp.issubdtype(rates.dtype, jnp.floating) else jnp.float32
+    lam = jnp.maximum(rates.astype(dtype), 0.0) * dt
+    return jax.random.poisson(key, lam, rates.shape, dtype=jnp.int32)
+
+
+def _static_int(name, value, minimum):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise UserError(f"{name} must be an int >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _grid_roi(roi, rows, cols, shape=None):
+    """Validated ``(row0, row1, col0, col1), rows, cols`` as Python ints."""
+    rows = _static_int("rows", rows, 1)
+    cols = _static_int("cols", cols, 1)
+    try:
+        row0, row1, col0, col1 = roi
+    except (TypeError, ValueError):
+        raise UserError(f"roi must be (row0, row1, col0, col1), got {roi!r}") from None
+    row0, row1, col0, col1 = (_static_int("roi bounds", v, 0) for v in (row0, row1, col0, col1))
+    if row1 <= row0 or col1 <= col0:
+        raise UserError(f"roi {roi!r} is empty: it needs row0 < row1 and col0 < col1")
+    if shape is not None:
+        height, width = shape
+        if row1 > height or col1 > width:
+            raise UserError(f"roi {roi!r} (row0, row1, col0, col1) reaches outside the {height} x {width} frame")
+    return (row0, row1, col0, col1), rows, cols
+
+
+def _cell_one_hot(n_pixels: int, n_cells: int) -> np.ndarray:
+    """``(n_pixels, n_cells)`` int32: pixel ``i`` of the ROI lies in cell ``floor(n_cells i / n_pixels)``."""
+    cell = (n_cells * np.arange(n_pixels)) // n_pixels
+    return (cell[:, None] == np.arange(n_cells)[None, :]).astype(np.int32)
+
+
+def grid_counts(
+    prev_frame: jax.Array,
+    frame: jax.Array,
+    *,
+    threshold,
+    roi: tuple[int, int, int, int],
+    rows: int = 2,
+    cols: int = 5,
+    log: bool = False,
+    eps: float = 1e-3,
+) -> jax.Array:
+    """Frame-difference DVS events counted in a ``rows x cols`` grid of a region of interest.
+
+    The input side of Eq. (2) of the snake R-STDP paper: the ``N_event`` of each
+    cell of the 2 x 5 grid over the ROI of the DVS frame, both polarities
+    together. A pixel ``(x, y)`` has an event when ``|d| >= threshold``, ``d`` the
+    difference of the two frames (``log=True``: of their logarithms), exactly as
+    `spikejax.vision.dvs.frame_difference` decides (the same float32 arithmetic),
+    but the events are counted on the dense difference image: there is no
+    capacity, nothing can overflow, and the result equals
+    ``event_grid_counts(frame_difference(...)[0], ...)`` whenever that call
+    reports no overflow.
+
+    A pixel at column ``x`` and row ``y`` of the ROI falls in the cell of column
+    ``c = floor(cols (x - col0) / (col1 - col0))`` and row
+    ``r = floor(rows (y - row0) / (row1 - row0))``, so cells differ by at most a
+    pixel in width when the ROI's size is not a multiple of the grid's.
+
+    Args:
+        prev_frame, frame: ``(height, width)`` intensities in ``[0, 1]``, row ``y``
+            and column ``x`` (row 0 at the top), as in `spikejax.vision.events`.
+        threshold: smallest change that makes an event (may be traced).
+        roi: ``(row0, row1, col0, col1)``, half-open pixel ranges of rows (``y``)
+            and columns (``x``), static ints inside the frame.
+        rows, cols: grid size (static), >= 1; the paper's grid is 2 x 5.
+        log: take the difference of log intensities, ``log(I + eps)``.
+        eps: offset inside the logarithm.
+
+    Returns:
+        Counts, int32, shape ``(rows * cols,)``, row-major: cell ``(r, c)`` at
+        ``r * cols + c`` (row 0 at the top, column 0 on the left).
+
+    Raises:
+        UserError: if the frames are not 2-D of one shape, or ``roi``, ``rows``
+            or ``cols`` is invalid (empty, outside the frame, not an int).
+
+    Examples:
+        >>> prev = jnp.zeros((4, 10))
+        >>> grid_counts(prev, prev.at[0, 9].set(1.0), threshold=0.5, roi=(0, 4, 0, 10)).tolist()
+        [0, 0, 0, 0, 1, 0, 0, 0, 0, 0]
+    """
+    prev_frame = jnp.asarray(prev_frame, jnp.float32)
+    frame = jnp.asarray(frame, jnp.float32)
+    if frame.ndim != 2 or prev_frame.shape != frame.shape:
+        raise UserError(f"frames must be 2-D (height, width) of one shape, got {prev_frame.shape} and {frame.shape}")
+    (row0, row1, col0, col1), rows, cols = _grid_roi(roi, rows, cols, frame.shape)
+    prev_frame = prev_frame[row0:row1, col0:col1]
+    frame = frame[row0:row1, col0:col1]
+    if log:
+        d = jnp.log(frame + eps) - jnp.log(prev_frame + eps)
+    else:
+        d = frame - prev_frame
+    events = (jnp.abs(d) >= threshold).astype(jnp.int32)
+    by_row = jnp.asarray(_cell_one_hot(row1 - row0, rows))
+    by_col = jnp.asarray(_cell_one_hot(col1 - col0, cols))
+    return (by_row.T @ events @ by_col).astype(jnp.int32).reshape(rows * cols)
+
+
+def event_grid_counts(events: Events, *, roi: tuple[int, int, int, int], rows: int = 2, cols: int = 5) -> jax.Array:
+    """The counts of `grid_counts` from compacted events (valid slots only, any polarity).
+
+    Args:
+        events: one `spikejax.vision.Events` stream (no batch axis).
+        roi: ``(row0, row1, col0, col1)``, half-open ranges of ``y`` and ``x``;
+            events outside it are ignored.
+        rows, cols: grid size (static), >= 1.
+
+    Returns:
+        Counts, int32, shape ``(rows * cols,)``, index ``r * cols + c`` as in `grid_counts`.
+
+    Raises:
+        UserError: if ``roi``, ``rows`` or ``cols`` is invalid.
+    """
+    (row0, row1, col0, col1), rows, cols = _grid_roi(roi, rows, cols)
+    x = jnp.asarray(events.x, jnp.int32)
+    y = jnp.asarray(events.y, jnp.int32)
+    inside = events.valid & (x >= col0) & (x < col1) & (y >= row0) & (y < row1)
+    c = (cols * (x - col0)) // (col1 - col0)
+    r = (rows * (y - row0)) // (row1 - row0)
+    cell = jnp.where(inside, r * cols + c, 0)
+    return jnp.zeros((rows * cols,), jnp.int32).at[cell].add(inside.astype(jnp.int32))
+
+
+def grid_rates(counts: jax.Array, t_step, max_rate=None) -> jax.Array:
+    """Poisson rates from event counts, Eq. (2) of the snake R-STDP paper: ``f = N_event / t_step``.
+
+    A generator of rate ``f`` then fires ``N_event`` spikes on average over the
+    next ``t_step`` (with `poisson_counts`; `poisson_spikes` saturates at one
+    spike a step). The paper has no cap; ``max_rate`` is this project's option
+    against a frame full of events driving the inputs to absurd rates.
+
+    Args:
+        counts: event counts per cell, any shape (int or float).
+        t_step: the window the counts were taken over, s (20 ms in the paper), > 0.
+        max_rate: optional cap, Hz, ``f = min(N / t_step, max_rate)`` (may be
+            traced); ``None``: no cap.
+
+    Returns:
+        Rates, Hz, the shape of ``counts``, float: the dtype of ``counts`` and
+        ``t_step`` promoted together (integer counts count as the default float).
+
+    Raises:
+        UserError: if ``t_step`` is a Python number <= 0.
+
+    Examples:
+        >>> grid_rates(jnp.array([0, 3, 10]), 0.02, max_rate=200.0).tolist()
+        [0.0, 150.0, 200.0]
+    """
+    if isinstance(t_step, (int, float)) and not t_step > 0:
+        raise UserError(f"t_step must be > 0 s, got {t_step!r}")
+    counts = jnp.asarray(counts)
+    dtype = jnp.result_type(counts.dtype if jnp.issubdtype(counts.dtype, jnp.floating) else float, t_step)
+    f = counts.astype(dtype) / t_step
+    if max_rate is not None:
+        f = jnp.minimum(f, jnp.asarray(max_rate, dtype))
+    return f.astype(dtype)
+
+
+def antagonist_rates(alpha: jax.Array, k) -> jax.Array:
+    """Rates of antagonist Poisson pairs that encode joint angles, Eq. (3) of the snake R-STDP paper.
+
+    ``f_P = max(0, k alpha)``, ``f_N = max(0, -k alpha)``: each angle drives one
+    neuron of its pair, the positive one for a positive angle, the negative one
+    for a negative angle, at a rate proportional to its magnitude; the other is
+    silent. The paper encodes joints 1, 3 and 5 this way.
+
+    Args:
+        alpha: joint angles, shape ``(m,)`` (units of the caller's choosing: ``k``
+            is per unit of ``alpha``).
+        k: gain, Hz per unit angle, > 0 (may be traced).
+
+    Returns:
+        Rates, Hz, shape ``(2 m,)``, interleaved:
+        ``[f_P(alpha_0), f_N(alpha_0), f_P(alpha_1), f_N(alpha_1), ...]``.
+
+    Examples:
+        >>> antagonist_rates(jnp.array([10.0, -30.0]), 2.0).tolist()
+        [20.0, 0.0, 0.0, 60.0]
+    """
+    scaled = k * jnp.asarray(alpha)
+    zero = jnp.zeros((), scaled.dtype)
+    pairs = jnp.stack([jnp.maximum(scaled, zero), jnp.maximum(-scaled, zero)], axis=-1)
+    return pairs.reshape(pairs.shape[:-2] + (-1,))
+
+
+def d_norm(n_right: jax.Array, n_left: jax.Array) -> jax.Array:
+    """Normalised turn intention of a pair of output neurons, Eq. (4) of the snake R-STDP paper.
+
+    ``D_norm = (N_r - N_l) / (N_r + N_l)`` in ``[-1, 1]``, positive when the right
+    neuron fired more. The paper leaves the case of no spike at all undefined;
+    here it is 0 (no intention to turn), without a NaN (also in gradients).
+
+    Args:
+        n_right, n_left: spike counts of the right and left neuron in the window,
+            >= 0, broadcasting shapes.
+
+    Returns:
+        ``D_norm``, float (the counts' float dtype, or the default float for integer counts).
+
+    Examples:
+        >>> d_norm(jnp.array([3, 0, 0]), jnp.array([1, 2, 0])).tolist()
+        [0.5, -1.0, 0.0]
+    """
+    n_right = jnp.asarray(n_right)
+    n_left = jnp.asarray(n_left)
+    dtype = jnp.result_type(n_right, n_left)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.zeros(()).dtype
+    n_right = n_right.astype(dtype)
+    n_left = n_left.astype(dtype)
+    total = n_right + n_left
+    some = total > 0
+    return jnp.where(some, (n_right - n_left) / jnp.where(some, total, 1), jnp.zeros((), dtype))
+
+
+def direction_step(d_prev: jax.Array, d_norm: jax.Array, eta) -> jax.Array:
+    """One step of the saturating direction integrator, Eq. (5) of the snake R-STDP paper.
+
+    ``D_t = min(1, max(-1, D_{t-1} + eta D_norm))``. It integrates rather than
+    filters: a constant ``D_norm = 1`` takes ``D_t`` from 0 to 1 in ``1 / eta``
+    steps, and ``eta`` sets how aggressively the direction can change (the
+    paper: 0.07 for the body, 0.02 for the head).
+
+    Args:
+        d_prev: ``D_{t-1}``, in ``[-1, 1]``.
+        d_norm: this step's `d_norm`.
+        eta: gain, >= 0 (may be traced).
+
+    Returns:
+        ``D_t``, the broadcast shape.
+
+    Examples:
+        >>> float(direction_step(jnp.float32(0.98), jnp.float32(1.0), 0.07))
+        1.0
+    """
+    return jnp.clip(d_prev + eta * d_norm, -1, 1)
