@@ -6,7 +6,7 @@ import numpy as np
 
 from spikejax.errors import UserError
 
-__all__ = ["wilson_interval"]
+__all__ = ["mean_interval", "wilson_interval"]
 
 
 def wilson_interval(successes, trials, z: float = 1.959963984540054) -> tuple[np.ndarray, np.ndarray]:
@@ -36,3 +36,31 @@ def wilson_interval(successes, trials, z: float = 1.959963984540054) -> tuple[np
     centre = (p + z**2 / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n**2)) / denom
     return np.clip(centre - half, 0.0, 1.0), np.clip(centre + half, 0.0, 1.0)
+
+
+def mean_interval(values, level: float = 0.95) -> tuple[float, float, float]:
+    """The mean of ``values`` and its Student-t confidence interval (95 % by default).
+
+    Over seeds, which are independent draws, this is the interval a reader
+    expects beside a mean; one value gives an interval of NaNs rather than a
+    misleading zero width.
+
+    Args:
+        values: a 1-D sample, finite.
+        level: the interval's coverage in (0, 1).
+
+    Returns:
+        ``(mean, low, high)`` as floats.
+    """
+    from scipy.stats import t
+
+    x = np.asarray(values, dtype=np.float64).reshape(-1)
+    if x.size == 0 or not np.all(np.isfinite(x)):
+        raise UserError("mean_interval needs at least one value, all finite")
+    if not 0 < level < 1:
+        raise UserError(f"level must be in (0, 1), got {level}")
+    mean = float(x.mean())
+    if x.size == 1:
+        return mean, float("nan"), float("nan")
+    half = float(t.ppf(0.5 + level / 2, x.size - 1) * x.std(ddof=1) / np.sqrt(x.size))
+    return mean, mean - half, mean + half

@@ -30,3 +30,18 @@ def test_wilson_rejects_bad_counts():
         wilson_interval(5, 4)
     with pytest.raises(UserError):
         wilson_interval(0, 0)
+
+
+def test_mean_interval_hand_computed_and_edges():
+    from spikejax.stats import mean_interval
+
+    # n = 4, mean 2.5, sd = sqrt(5/3); t(0.975, 3) = 3.182446305284263
+    mean, low, high = mean_interval([1.0, 2.0, 3.0, 4.0])
+    half = 3.182446305284263 * np.sqrt(5 / 3) / 2
+    assert (mean, low, high) == pytest.approx((2.5, 2.5 - half, 2.5 + half), rel=1e-12)
+    assert mean_interval([3.0, 3.0, 3.0]) == (3.0, 3.0, 3.0)
+    one = mean_interval([7.0])
+    assert one[0] == 7.0 and np.isnan(one[1]) and np.isnan(one[2])
+    for bad in ([], [1.0, float("nan")]):
+        with pytest.raises(UserError):
+            mean_interval(bad)
