@@ -22,6 +22,9 @@ closed loop").
 
 Absent synapses are NaN in ``w0``, so that one gathered row carries both the
 weights and the connectivity; they read as 0.
+
+A connection's transmission delay of a whole number of steps is a `DelayLine`, a
+ring buffer with NEST's timing (`delay_step`).
 """
 
 from __future__ import annotations
@@ -34,7 +37,19 @@ import jax.numpy as jnp
 from spikejax import bits
 from spikejax.errors import UserError
 
-__all__ = ["RowWeights", "row_weights", "add_to_rows", "dense", "connected", "propagate"]
+__all__ = [
+    "RowWeights",
+    "row_weights",
+    "add_to_rows",
+    "dense",
+    "connected",
+    "propagate",
+    "DelayLine",
+    "delay_steps_of",
+    "delay_init",
+    "delay_read",
+    "delay_step",
+]
 
 
 class RowWeights(NamedTuple):
@@ -139,3 +154,83 @@ def propagate(rows: RowWeights, spikes: jax.Array, max_rows: int = 24) -> jax.Ar
 
     total, _ = jax.lax.while_loop(lambda c: jnp.any(c[1] != 0), more, gathered(words))
     return total
+
+
+class DelayLine(NamedTuple):
+    """A transmission delay of a whole number ``D`` of steps, as a ring buffer.
+
+    Attributes:
+        buffer: the values of the last ``D`` steps, shape ``(D, n)``; slot
+            ``head`` holds the oldest, the one due now.
+        head: index of the oldest slot, int32 scalar.
+    """
+
+    buffer: jax.Array
+    head: jax.Array
+
+
+def delay_steps_of(delay_ms, dt) -> int:
+    """A delay in ms as whole steps, rounded to nearest as NEST rounds it; at least 1.
+
+    Args:
+        delay_ms: the connection delay, ms (static).
+        dt: the step, ms (static).
+
+    Raises:
+        UserError: if the delay is shorter than half a step (NEST requires
+            delays of at least one step).
+    """
+    steps = int(round(float(delay_ms) / float(dt)))
+    if steps < 1:
+        raise UserError(f"delay must be at least one step ({dt} ms), got {delay_ms!r} ms")
+    return steps
+
+
+def delay_init(n: int, delay_steps: int, dtype=jnp.float32) -> DelayLine:
+    """An empty delay line of ``delay_steps`` steps for ``n`` values.
+
+    Args:
+        n: values per step (static), e.g. the neurons of the presynaptic population.
+        delay_steps: ``D``, the delay in steps (static), >= 1; see `delay_steps_of`.
+        dtype: dtype of the values (spike counts may be integers).
+
+    Raises:
+        UserError: if ``n < 0`` or ``delay_steps < 1``.
+    """
+    if int(delay_steps) != delay_steps or int(delay_steps) < 1:
+        raise UserError(f"delay_steps must be an integer >= 1, got {delay_steps!r}")
+    if int(n) < 0:
+        raise UserError(f"n must be >= 0, got {n!r}")
+    return DelayLine(buffer=jnp.zeros((int(delay_steps), int(n)), dtype), head=jnp.zeros((), jnp.int32))
+
+
+def delay_read(line: DelayLine) -> jax.Array:
+    """The values due this step, pushed ``D`` steps ago: what `delay_step` will pop next."""
+    return line.buffer[line.head]
+
+
+def delay_step(line: DelayLine, x: jax.Array) -> tuple[DelayLine, jax.Array]:
+    """Pushes this step's ``x``, pops those pushed ``D`` steps (calls) ago.
+
+    Called once per step, ``out_k = x_{k-D}``, and 0 for ``k < D``. The output
+    does not depend on ``x``, so a step can read it first (`delay_read`) and
+    push afterwards. That is NEST's timing for a neuron model such as
+    `spikejax.neurons.iaf_psc_alpha_step`: the spikes emitted in step ``k``
+    (stamped ``(k + 1) dt``) over a connection of ``D`` steps are the input of
+    the target's step ``k + D``. One step of a network is::
+
+        arriving = delay_read(line)                    # spikes of step k - D
+        state, spikes = iaf_psc_alpha_step(p, state, arriving @ w_ex, arriving @ w_in, dt)
+        line, _ = delay_step(line, spikes)             # push step k's spikes
+
+    Args:
+        line: the delay line.
+        x: this step's values, ``(n,)``.
+
+    Returns:
+        The line advanced by one step and the values pushed ``D`` steps ago, ``(n,)``.
+    """
+    out = line.buffer[line.head]
+    buffer = line.buffer.at[line.head].set(jnp.asarray(x, line.buffer.dtype))
+    head = (line.head + 1) % line.buffer.shape[0]
+    return DelayLine(buffer=buffer, head=head.astype(jnp.int32)), out
