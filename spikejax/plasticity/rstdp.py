@@ -1,0 +1,488 @@
+"""Reward-modulated STDP, Eq. (6)-(8) of the snake R-STDP paper, as NEST 3.10's ``stdp_dopamine_synapse``.
+
+The paper ran its networks in NEST, so its R-STDP is NEST's ``stdp_dopamine_synapse``
+(Potjans et al. 2010). This module gives it twice, from the same maths (`_advance`,
+`_weight_piece`):
+
+* `rstdp`: a time-driven rule, one update per neural step for a dense group of
+  synapses, written for one instance (``vmap`` adds snakes and parameter sets).
+  It integrates the model exactly (closed form per step), every spike at its own
+  time.
+* `replay`: NEST's own event schedule for one synapse, lazy update points and all,
+  for checking against NEST to 1e-6 and for measuring what the schedule changes.
+
+The model, NEST's names and units (ms; weights in NEST units, ``dw/dt`` per ms):
+
+* pre trace ``K_plus``: +1 per presynaptic spike, decays with ``tau_plus``;
+* post trace ``K_minus``: +1 per postsynaptic spike, decays with ``tau_minus`` (in
+  NEST a parameter of the postsynaptic neuron, default 20 ms); the synapse sees post
+  spikes one dendritic delay ``d`` late;
+* eligibility ``c`` (Eq. (6) of the snake R-STDP paper, ``C_1`` absorbed in ``A_plus``,
+  ``A_minus``): at each post spike arriving at ``t`` (emitted at ``t - d``),
+  ``c += A_plus * K_plus(t)`` with ``K_plus`` of the pre spikes strictly before ``t``;
+  at each pre spike at ``t``, ``c -= A_minus * K_minus(t - d)`` with ``K_minus`` of the
+  post spikes emitted strictly before ``t - d``; all-to-all pairing, so a pre spike and
+  a post arrival at the same instant do not pair; between spikes ``dc/dt = -c / tau_c``;
+* dopamine ``n`` (Eq. (7) of the snake R-STDP paper, ``C_2 = 1``): ``+= m / tau_n`` for
+  ``m`` dopamine spikes reaching the volume transmitter, decays with ``tau_n``;
+* weight (Eq. (8) of the snake R-STDP paper): ``dw/dt = c (n - b)``, integrated in closed
+  form over each interval without spikes (`_weight_piece`) and clipped to
+  ``[Wmin, Wmax]`` after each interval.
+
+Where the time-driven rule and NEST part (`replay` reproduces all of it):
+
+1. Clipping. NEST clips only at its update points (pre spikes, post arrivals and
+   dopamine spikes inside an update, and the volume transmitter's triggers every
+   ``deliver_interval * min_delay``); `rstdp` clips after every step. They agree
+   unless the weight sits at a bound while ``c (n - b)`` changes sign between two
+   update points, which needs ``b > 0`` and ``n`` decaying through ``b``.
+2. Delivery order. NEST delivers a spike emitted in a min-delay slice at the start
+   of the next slice, after the volume transmitter's trigger at the end of the
+   slice. A pre spike at ``t`` inside such a slice is then processed after the
+   synapse has already been brought to the trigger time ``T > t``: NEST integrates
+   ``w``, ``c`` and ``K_plus`` back from ``T`` to ``t`` (``n`` included, so a dopamine
+   spike or a ``SetStatus`` of ``n`` in ``(t, T]`` acts as if it came before ``t``), and a
+   post arrival in ``(t, T]`` is paired twice: once at the trigger without this pre
+   spike, once at the next update point with it (NEST reads that stretch of the post
+   history again, unless it was pruned). A pre spike exactly at a slice end
+   (``t = T``) is exact. So `rstdp` equals NEST when every pre spike lands on a
+   multiple of the min delay (1 ms for 1 ms delays), up to the clipping of point 1;
+   otherwise the two differ by these terms, which `replay` measures.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spikejax.errors import UserError
+from spikejax.plasticity.base import PlasticityRule
+
+__all__ = ["RSTDPParams", "RSTDPState", "rstdp_params", "rstdp", "set_dopamine", "replay"]
+
+_NEST_DEFAULTS = {
+    "A_plus": 1.0,
+    "A_minus": 1.5,
+    "tau_plus": 20.0,
+    "tau_c": 1000.0,
+    "tau_n": 200.0,
+    "b": 0.0,
+    "Wmin": 0.0,
+    "Wmax": 200.0,
+}
+_STDP_EPS = 1e-6  # NEST's stdp_eps, ms: spike times closer than this count as simultaneous.
+
+
+class RSTDPParams(NamedTuple):
+    """Parameters of one group of R-STDP synapses, NEST's names and units.
+
+    Every field is a scalar array (traced), so ``jax.vmap`` over a batch of parameter
+    sets compiles once.
+
+    Attributes:
+        A_plus: eligibility jump per pre-before-post pairing, times ``K_plus``.
+        A_minus: eligibility drop per post-before-pre pairing, times ``K_minus``.
+        tau_plus: decay of the presynaptic trace ``K_plus``, ms.
+        tau_minus: decay of the postsynaptic trace ``K_minus``, ms (in NEST the
+            postsynaptic neuron's ``tau_minus``).
+        tau_c: decay of the eligibility ``c`` (Eq. (6) of the snake R-STDP paper), ms.
+        tau_n: decay of the dopamine ``n`` (Eq. (7) of the snake R-STDP paper), ms.
+        b: dopamine baseline of Eq. (8) of the snake R-STDP paper.
+        Wmin: lower weight bound.
+        Wmax: upper weight bound.
+    """
+
+    A_plus: jax.Array
+    A_minus: jax.Array
+    tau_plus: jax.Array
+    tau_minus: jax.Array
+    tau_c: jax.Array
+    tau_n: jax.Array
+    b: jax.Array
+    Wmin: jax.Array
+    Wmax: jax.Array
+
+
+class RSTDPState(NamedTuple):
+    """State of one group of R-STDP synapses at the end of a neural step ``t``.
+
+    Attributes:
+        k_plus: ``(n_pre,)`` presynaptic traces ``K_plus(t)``, this step's spikes included.
+        k_minus: ``(n_post,)`` postsynaptic traces as the synapse sees them,
+            ``K_minus(t - d)``, post spikes emitted up to ``t - d`` included.
+        c: ``(n_pre, n_post)`` eligibility traces.
+        n: ``(n_post,)`` dopamine per postsynaptic neuron (all synapses onto a neuron
+            share it).
+        post_line: ``(delay_steps, n_post)`` post spike counts on their way along the
+            dendritic delay; row 0 arrives next step.
+    """
+
+    k_plus: jax.Array
+    k_minus: jax.Array
+    c: jax.Array
+    n: jax.Array
+    post_line: jax.Array
+
+
+def rstdp_params(
+    *,
+    A_plus=1.0,
+    A_minus=1.5,
+    tau_plus=20.0,
+    tau_minus=20.0,
+    tau_c=1000.0,
+    tau_n=200.0,
+    b=0.0,
+    Wmin=0.0,
+    Wmax=200.0,
+    dtype=jnp.float32,
+) -> RSTDPParams:
+    """`RSTDPParams` with NEST 3.10's defaults, every field a scalar of ``dtype``.
+
+    Raises:
+        UserError: a time constant that is not positive, or ``Wmin > Wmax`` (checked
+            when the values are concrete).
+    """
+    values = dict(
+        A_plus=A_plus,
+        A_minus=A_minus,
+        tau_plus=tau_plus,
+        tau_minus=tau_minus,
+        tau_c=tau_c,
+        tau_n=tau_n,
+        b=b,
+        Wmin=Wmin,
+        Wmax=Wmax,
+    )
+    _check(values, "rstdp_params")
+    return RSTDPParams(**{k: jnp.asarray(v, dtype) for k, v in values.items()})
+
+
+def _check(values, where):
+    concrete = {k: v for k, v in values.items() if not isinstance(v, jax.core.Tracer)}
+    for name in ("tau_plus", "tau_minus", "tau_c", "tau_n"):
+        if name in concrete and np.any(np.asarray(concrete[name]) <= 0):
+            raise UserError(f"{where}: {name} must be > 0 ms, got {concrete[name]}")
+    if "Wmin" in concrete and "Wmax" in concrete and np.any(np.asarray(concrete["Wmin"]) > np.asarray(concrete["Wmax"])):
+        raise UserError(f"{where}: Wmin {concrete['Wmin']} is above Wmax {concrete['Wmax']}")
+
+
+def _weight_piece(c0, n0, delta, p, xp):
+    """Eq. (8) of the snake R-STDP paper over ``delta`` ms without spikes, in closed form.
+
+    With ``c = c0 exp(-s / tau_c)`` and ``n = n0 exp(-s / tau_n)``,
+    ``w(delta) - w(0) = c0 n0 tau_s (1 - exp(-delta / tau_s)) - b c0 tau_c (1 - exp(-delta / tau_c))``,
+    ``1 / tau_s = 1 / tau_c + 1 / tau_n``, written with ``expm1`` as NEST writes it. A
+    negative ``delta`` integrates backwards, as NEST does for late-delivered spikes.
+    """
+    inv_tau_s = (p.tau_c + p.tau_n) / (p.tau_c * p.tau_n)
+    return -c0 * (n0 / inv_tau_s * xp.expm1(-inv_tau_s * delta) - p.b * p.tau_c * xp.expm1(-delta / p.tau_c))
+
+
+def _advance(w, c, n, delta, p, xp):
+    """``w``, ``c``, ``n`` after ``delta`` ms without spikes; ``w`` clipped to ``[Wmin, Wmax]``."""
+    w = xp.clip(w + _weight_piece(c, n, delta, p, xp), p.Wmin, p.Wmax)
+    return w, c * xp.exp(-delta / p.tau_c), n * xp.exp(-delta / p.tau_n)
+
+
+def rstdp(n_pre: int, n_post: int, *, delay_steps: int = 10) -> PlasticityRule:
+    """The time-driven R-STDP rule of Eq. (6)-(8) of the snake R-STDP paper for a dense group.
+
+    One ``update`` is one neural step of length ``dt`` ending at ``t``: the step's
+    spikes are stamped ``t`` (as NEST stamps them). In order:
+
+    1. post spikes emitted ``delay_steps`` steps ago arrive;
+    2. ``w``, ``c``, ``n`` and both traces advance over ``dt`` in closed form (`_advance`),
+       ``w`` clipped to ``[Wmin, Wmax]``;
+    3. each arrival raises ``c`` by ``A_plus * K_plus`` (pre spikes before ``t``);
+    4. each pre spike lowers ``c`` by ``A_minus * K_minus`` (post spikes emitted
+       before ``t - d``);
+    5. ``K_plus += pre``, ``K_minus += arrivals``, ``n += dopamine / tau_n``.
+
+    A pre spike and a post arrival in the same step do not pair (as in NEST). Spike
+    counts above 1 act as that many spikes at the same time (NEST unrolls
+    multiplicities). The module docstring says where this differs from NEST's
+    schedule (clipping between update points, late delivery inside a min-delay slice).
+
+    Args:
+        n_pre: number of presynaptic neurons.
+        n_post: number of postsynaptic neurons.
+        delay_steps: the synapses' dendritic delay in neural steps (NEST's ``delay``
+            divided by the resolution), >= 1.
+
+    Returns:
+        ``PlasticityRule(init, update)``: ``init(weights) -> RSTDPState`` (all traces 0)
+        and ``update(params, state, weights, pre, post, dopamine, dt) -> (dw, state)``,
+        ``weights`` and ``dw`` ``(n_pre, n_post)``, ``pre`` ``(n_pre,)`` and ``post``
+        ``(n_post,)`` spike counts of this step, ``dopamine`` the scalar count of dopamine
+        spikes reaching the volume transmitter this step (0 when ``n`` is set with
+        `set_dopamine` instead), ``dt`` the step in ms. ``weights + dw`` is clipped to
+        ``[Wmin, Wmax]``.
+
+    Raises:
+        UserError: a size below 1 or ``delay_steps`` below 1.
+
+    Examples:
+        >>> rule = rstdp(1, 1, delay_steps=1)
+        >>> p = rstdp_params()
+        >>> w = jnp.full((1, 1), 10.0)
+        >>> s = rule.init(w)
+        >>> _, s = rule.update(p, s, w, jnp.ones(1), jnp.zeros(1), 0.0, 0.1)
+        >>> _, s = rule.update(p, s, w, jnp.zeros(1), jnp.ones(1), 0.0, 0.1)
+        >>> _, s = rule.update(p, s, w, jnp.zeros(1), jnp.zeros(1), 0.0, 0.1)
+        >>> round(float(s.c[0, 0]), 6)  # A_plus * exp(-0.2 / 20), decayed 0.1 ms
+        0.989951
+    """
+    for name, v in (("n_pre", n_pre), ("n_post", n_post), ("delay_steps", delay_steps)):
+        if not isinstance(v, (int, np.integer)) or v < 1:
+            raise UserError(f"rstdp: {name} must be an integer >= 1, got {v!r}")
+
+    def init(weights: jax.Array) -> RSTDPState:
+        if weights.shape != (n_pre, n_post):
+            raise UserError(f"rstdp: weights of shape {weights.shape}, expected {(n_pre, n_post)}")
+        dtype = weights.dtype if jnp.issubdtype(weights.dtype, jnp.floating) else jnp.float32
+        return RSTDPState(
+            k_plus=jnp.zeros((n_pre,), dtype),
+            k_minus=jnp.zeros((n_post,), dtype),
+            c=jnp.zeros((n_pre, n_post), dtype),
+            n=jnp.zeros((n_post,), dtype),
+            post_line=jnp.zeros((delay_steps, n_post), dtype),
+        )
+
+    def update(params, state, weights, pre, post, dopamine, dt):
+        dtype = state.c.dtype
+        pre = jnp.asarray(pre, dtype)
+        post = jnp.asarray(post, dtype)
+        arrived = state.post_line[0]
+        w, c, n = _advance(weights, state.c, state.n[None, :], dt, params, jnp)
+        k_plus = state.k_plus * jnp.exp(-dt / params.tau_plus)
+        k_minus = state.k_minus * jnp.exp(-dt / params.tau_minus)
+        c = c + params.A_plus * k_plus[:, None] * arrived[None, :] - params.A_minus * pre[:, None] * k_minus[None, :]
+        new = RSTDPState(
+            k_plus=k_plus + pre,
+            k_minus=k_minus + arrived,
+            c=c.astype(dtype),
+            n=(n[0] + jnp.asarray(dopamine, dtype) / params.tau_n).astype(dtype),
+            post_line=jnp.concatenate([state.post_line[1:], post[None, :]], axis=0),
+        )
+        return (w - weights).astype(weights.dtype), new
+
+    return PlasticityRule(init, update)
+
+
+def set_dopamine(state: RSTDPState, n) -> RSTDPState:
+    """``state`` with the dopamine of every postsynaptic neuron overwritten by ``n``.
+
+    The authors' group sets ``n`` on every connection once per control step
+    (``SetStatus(conns, {"n": r})``); call this between two `rstdp` updates at the
+    same point. ``n`` is a scalar or ``(n_post,)`` (the reward of each postsynaptic neuron).
+    """
+    return state._replace(n=jnp.broadcast_to(jnp.asarray(n, state.n.dtype), state.n.shape))
+
+
+class _NestSynapse:
+    """One ``stdp_dopamine_synapse``, its postsynaptic archive and volume transmitter, as NEST runs them."""
+
+    def __init__(self, p, w0, d, max_delay, min_delay, n0):
+        self.p, self.d, self.prune_after = p, d, max_delay + min_delay + _STDP_EPS
+        self.w, self.c, self.n, self.kplus, self.t_last = float(w0), 0.0, float(n0), 0.0, 0.0
+        self.dopa = [(0.0, 0.0)]  # the volume transmitter's list, a pseudo spike at the last trigger first
+        self.idx = 0
+        self.history = []  # [t, K_minus, access_counter] of the postsynaptic neuron
+        self.kminus, self.last_post = 0.0, -1.0
+
+    # The postsynaptic neuron (ArchivingNode::set_spiketime, get_history, get_K_value).
+    def post_spike(self, t):
+        while len(self.history) > 1 and self.history[0][2] >= 1 and t - self.history[1][0] > self.prune_after:
+            self.history.pop(0)
+        self.kminus = self.kminus * math.exp((self.last_post - t) / float(self.p.tau_minus)) + 1.0
+        self.last_post = t
+        self.history.append([t, self.kminus, 0])
+
+    def get_history(self, t1, t2):
+        out = [h for h in self.history if t1 + _STDP_EPS <= h[0] < t2 + _STDP_EPS]
+        for h in out:
+            h[2] += 1
+        return out
+
+    def k_value(self, t):
+        for h in reversed(self.history):
+            if t - h[0] > _STDP_EPS:
+                return h[1] * math.exp((h[0] - t) / float(self.p.tau_minus))
+        return 0.0
+
+    # The synapse (stdp_dopamine_synapse.h).
+    def _piece(self, c0, n0, minus_dt):
+        self.w, _, _ = _advance(self.w, c0, n0, -minus_dt, self.p, np)
+        self.w = float(self.w)
+
+    def _dopamine_step(self):
+        (t_a, _), (t_b, m) = self.dopa[self.idx], self.dopa[self.idx + 1]
+        self.idx += 1
+        self.n = self.n * math.exp((t_a - t_b) / float(self.p.tau_n)) + m / float(self.p.tau_n)
+
+    def _pending(self, t1):
+        return len(self.dopa) > self.idx + 1 and t1 - self.dopa[self.idx + 1][0] > -_STDP_EPS
+
+    def process_dopa(self, t0, t1):
+        tau_c, tau_n = float(self.p.tau_c), float(self.p.tau_n)
+        if self._pending(t1):
+            n0 = self.n * math.exp((self.dopa[self.idx][0] - t0) / tau_n)
+            self._piece(self.c, n0, t0 - self.dopa[self.idx + 1][0])
+            self._dopamine_step()
+            while self._pending(t1):
+                cd = self.c * math.exp((t0 - self.dopa[self.idx][0]) / tau_c)
+                self._piece(cd, self.n, self.dopa[self.idx][0] - self.dopa[self.idx + 1][0])
+                self._dopamine_step()
+            cd = self.c * math.exp((t0 - self.dopa[self.idx][0]) / tau_c)
+            self._piece(cd, self.n, self.dopa[self.idx][0] - t1)
+        else:
+            n0 = self.n * math.exp((self.dopa[self.idx][0] - t0) / tau_n)
+            self._piece(self.c, n0, t0 - t1)
+        self.c = self.c * math.exp((t0 - t1) / tau_c)
+
+    def _facilitations(self, t_end, t_spike=None):
+        t0 = self.t_last
+        for h in self.get_history(self.t_last - self.d, t_end - self.d):
+            self.process_dopa(t0, h[0] + self.d)
+            t0 = h[0] + self.d
+            if t_spike is None or t_spike - h[0] > _STDP_EPS:
+                self.c += float(self.p.A_plus) * self.kplus * math.exp((self.t_last - t0) / float(self.p.tau_plus))
+        return t0
+
+    def send(self, t_spike):
+        t0 = self._facilitations(t_spike, t_spike)
+        self.process_dopa(t0, t_spike)
+        self.c -= float(self.p.A_minus) * self.k_value(t_spike - self.d)
+        self.kplus = self.kplus * math.exp((self.t_last - t_spike) / float(self.p.tau_plus)) + 1.0
+        self.t_last = t_spike
+
+    def trigger(self, t_trig):
+        t0 = self._facilitations(t_trig)
+        self.process_dopa(t0, t_trig)
+        self.n = self.n * math.exp((self.dopa[self.idx][0] - t_trig) / float(self.p.tau_n))
+        self.kplus = self.kplus * math.exp((self.t_last - t_trig) / float(self.p.tau_plus))
+        self.t_last = t_trig
+        self.dopa = [(t_trig, 0.0)]
+        self.idx = 0
+
+
+def _steps(times_ms, h, name, n_steps):
+    steps = np.rint(np.asarray(times_ms, np.float64).ravel() / h).astype(np.int64)
+    if steps.size and (np.any(np.abs(steps * h - np.asarray(times_ms).ravel()) > 1e-6) or steps.min() < 1):
+        raise UserError(f"replay: {name} spike times must be positive multiples of the resolution {h} ms")
+    return np.bincount(steps, minlength=n_steps + 2)
+
+
+def replay(
+    params: dict,
+    pre_ms,
+    post_ms,
+    dopa_ms,
+    *,
+    w0,
+    t_sim_ms,
+    resolution_ms=0.1,
+    delay_ms=1.0,
+    tau_minus_ms=20.0,
+    dopa_delay_ms=None,
+    min_delay_ms=None,
+    max_delay_ms=None,
+    deliver_interval=1,
+    n_set=(),
+    n0=0.0,
+):
+    """One NEST ``stdp_dopamine_synapse`` replayed on NEST 3.10's own schedule, in float64.
+
+    The network replayed: a presynaptic and a postsynaptic neuron (parrots, say) with
+    the plastic synapse between them (``delay_ms``; on a receptor that does not make
+    the postsynaptic neuron fire), and a dopamine neuron connected to the synapse's
+    volume transmitter (``dopa_delay_ms``). Neurons are created before the volume
+    transmitter, so NEST updates them first in each slice. The schedule, per min-delay
+    slice ``(T - min_delay, T]``: the pre spikes of the previous slice are delivered
+    (processed) at its start, post spikes are archived as they happen, and the volume
+    transmitter collects dopamine and, when ``T`` is a multiple of
+    ``deliver_interval * min_delay``, brings every synapse to ``T``. The maths is the
+    time-driven rule's (`_advance`); what the schedule changes is listed in the module
+    docstring.
+
+    Args:
+        params: NEST's parameter names of the synapse model (``A_plus``, ``A_minus``,
+            ``tau_plus``, ``tau_c``, ``tau_n``, ``b``, ``Wmin``, ``Wmax``); missing ones take
+            NEST's defaults.
+        pre_ms, post_ms, dopa_ms: spike times (ms) of the pre, post and dopamine
+            neurons as NEST's spike recorders report them; repeated times are
+            multiplicities.
+        w0: initial weight.
+        t_sim_ms: simulated time, ms.
+        resolution_ms: NEST's resolution, ms.
+        delay_ms: the plastic synapse's (dendritic) delay, ms.
+        tau_minus_ms: the postsynaptic neuron's ``tau_minus``, ms.
+        dopa_delay_ms: delay from the dopamine neuron to the volume transmitter, ms
+            (default ``delay_ms``).
+        min_delay_ms, max_delay_ms: the network's smallest and largest delay (default:
+            the smallest and largest of ``delay_ms`` and ``dopa_delay_ms``).
+        deliver_interval: the volume transmitter's ``deliver_interval``, in min delays.
+        n_set: ``(t_ms, n)`` pairs: ``SetStatus({"n": n})`` on the connection after
+            ``Simulate`` up to ``t_ms``.
+        n0: the connection's initial ``n``.
+
+    Returns:
+        ``(t_ms, w, c, n)``, numpy float64 arrays of length ``t_sim_ms / resolution_ms``:
+        ``t_ms = resolution, 2 resolution, ..., t_sim_ms`` and what ``GetStatus`` of the
+        connection reports after ``Simulate`` up to ``t_ms`` (NEST's stored values: ``c``
+        at the last update point, ``n`` at the last dopamine spike or trigger; a value
+        ``n_set`` sets at ``t`` shows from the next step on, as ``GetStatus`` before
+        ``SetStatus``).
+
+    Raises:
+        UserError: spike times off the resolution grid, delays that are not multiples
+            of it or below ``min_delay_ms``.
+    """
+    h = float(resolution_ms)
+    unknown = set(params) - set(_NEST_DEFAULTS)
+    if unknown:
+        raise UserError(f"replay: unknown synapse parameters {sorted(unknown)}")
+    values = {**_NEST_DEFAULTS, **params, "tau_minus": tau_minus_ms}
+    _check(values, "replay")
+    p = RSTDPParams(**{k: np.float64(v) for k, v in values.items()})
+    dopa_delay_ms = delay_ms if dopa_delay_ms is None else dopa_delay_ms
+    min_delay_ms = min(delay_ms, dopa_delay_ms) if min_delay_ms is None else min_delay_ms
+    max_delay_ms = max(delay_ms, dopa_delay_ms) if max_delay_ms is None else max_delay_ms
+    to_steps = {}
+    for name, v in (("delay_ms", delay_ms), ("dopa_delay_ms", dopa_delay_ms), ("min_delay_ms", min_delay_ms)):
+        to_steps[name] = int(round(v / h))
+        if to_steps[name] < 1 or abs(to_steps[name] * h - v) > 1e-9:
+            raise UserError(f"replay: {name} {v} must be a positive multiple of the resolution {h} ms")
+    if min_delay_ms > min(delay_ms, dopa_delay_ms) + 1e-9:
+        raise UserError(f"replay: min_delay_ms {min_delay_ms} is above a delay of the network")
+    md = to_steps["min_delay_ms"]
+    n_steps = int(round(t_sim_ms / h))
+    pre = _steps(pre_ms, h, "pre", n_steps)
+    post = _steps(post_ms, h, "post", n_steps)
+    dopa_arrival = _steps(np.asarray(dopa_ms, np.float64) + dopa_delay_ms, h, "dopamine", n_steps)
+    sets = {}
+    for t, value in n_set:
+        sets[int(round(t / h))] = float(value)
+
+    syn = _NestSynapse(p, w0, float(delay_ms), float(max_delay_ms), float(min_delay_ms), n0)
+    out = np.zeros((3, n_steps))
+    for s in range(1, n_steps + 1):  # step s runs from (s-1) h to s h
+        if s - 1 in sets:
+            syn.n = sets[s - 1]
+        if (s - 1) % md == 0:
+            for k in range(s - md, s):
+                for _ in range(int(pre[k]) if k >= 1 else 0):
+                    syn.send(k * h)
+        for _ in range(int(post[s])):
+            syn.post_spike(s * h)
+        if dopa_arrival[s]:
+            syn.dopa.append((s * h, float(dopa_arrival[s])))
+        if s % (deliver_interval * md) == 0:
+            syn.trigger(s * h)
+        out[:, s - 1] = syn.w, syn.c, syn.n
+    return np.arange(1, n_steps + 1) * h, out[0], out[1], out[2]
