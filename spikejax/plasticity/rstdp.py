@@ -167,7 +167,11 @@ def _check(values, where):
     for name in ("tau_plus", "tau_minus", "tau_c", "tau_n"):
         if name in concrete and np.any(np.asarray(concrete[name]) <= 0):
             raise UserError(f"{where}: {name} must be > 0 ms, got {concrete[name]}")
-    if "Wmin" in concrete and "Wmax" in concrete and np.any(np.asarray(concrete["Wmin"]) > np.asarray(concrete["Wmax"])):
+    if (
+        "Wmin" in concrete
+        and "Wmax" in concrete
+        and np.any(np.asarray(concrete["Wmin"]) > np.asarray(concrete["Wmax"]))
+    ):
         raise UserError(f"{where}: Wmin {concrete['Wmin']} is above Wmax {concrete['Wmax']}")
 
 
@@ -234,8 +238,8 @@ def rstdp(n_pre: int, n_post: int, *, delay_steps: int = 10) -> PlasticityRule:
         >>> _, s = rule.update(p, s, w, jnp.ones(1), jnp.zeros(1), 0.0, 0.1)
         >>> _, s = rule.update(p, s, w, jnp.zeros(1), jnp.ones(1), 0.0, 0.1)
         >>> _, s = rule.update(p, s, w, jnp.zeros(1), jnp.zeros(1), 0.0, 0.1)
-        >>> round(float(s.c[0, 0]), 6)  # A_plus * exp(-0.2 / 20), decayed 0.1 ms
-        0.989951
+        >>> round(float(s.c[0, 0]), 6)  # the post spike of 0.2 ms arrives at 0.3 ms
+        0.99005
     """
     for name, v in (("n_pre", n_pre), ("n_post", n_post), ("delay_steps", delay_steps)):
         if not isinstance(v, (int, np.integer)) or v < 1:
