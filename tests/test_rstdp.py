@@ -25,26 +25,52 @@ def x64():
 
 
 def drive(
-    params, pre_steps, post_steps, n_steps, *, n_pre=1, n_post=1, w0=10.0, dopa_steps=(), n_set=None, delay_steps=10
+    params,
+    pre_steps,
+    post_steps,
+    n_steps,
+    *,
+    n_pre=1,
+    n_post=1,
+    w0=10.0,
+    dopa_steps=(),
+    n_set=None,
+    schedule="exact",
+    deliver_interval=1,
 ):
-    """Runs the time-driven rule; spikes as {step: counts}; returns w, c, n per step."""
+    """Runs the time-driven rule in a scan; spikes as {step: counts}; returns w, c, n after every step.
+
+    ``n_set`` maps a step ``k`` to the dopamine set (`set_dopamine`) after step ``k``.
+    """
     dtype = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
-    rule = rstdp(n_pre, n_post, delay_steps=delay_steps)
-    w = jnp.full((n_pre, n_post), w0, dtype)
-    s = rule.init(w)
-    update = jax.jit(rule.update)
-    ws, cs, ns = [], [], []
-    for k in range(1, n_steps + 1):
-        if n_set is not None and (k - 1) in n_set:
-            s = set_dopamine(s, n_set[k - 1])
-        pre = jnp.asarray(pre_steps.get(k, np.zeros(n_pre)), dtype)
-        post = jnp.asarray(post_steps.get(k, np.zeros(n_post)), dtype)
-        dw, s = update(params, s, w, pre, post, jnp.asarray(dopa_steps.count(k), dtype), H)
+    rule = rstdp(n_pre, n_post, delay_steps=10, schedule=schedule, deliver_interval=deliver_interval)
+    pre = np.zeros((n_steps + 1, n_pre))
+    post = np.zeros((n_steps + 1, n_post))
+    for k, v in pre_steps.items():
+        pre[k] += v
+    for k, v in post_steps.items():
+        post[k] += v
+    dopa = np.bincount(np.asarray(dopa_steps, int), minlength=n_steps + 1)[: n_steps + 1]
+    mask = np.zeros(n_steps + 1, bool)
+    value = np.zeros(n_steps + 1)
+    for k, v in (n_set or {}).items():
+        mask[k], value[k] = True, v
+
+    def body(carry, x):
+        w, s = carry
+        pre_k, post_k, dopa_k, m_prev, v_prev = x
+        s = jax.tree.map(lambda a, b: jnp.where(m_prev, a, b), set_dopamine(s, v_prev), s)
+        dw, s = rule.update(params, s, w, pre_k, post_k, dopa_k, H)
         w = w + dw
-        ws.append(np.asarray(w))
-        cs.append(np.asarray(s.c))
-        ns.append(np.asarray(s.n))
-    return np.array(ws), np.array(cs), np.array(ns)
+        return (w, s), (w, s.c, s.n)
+
+    w = jnp.full((n_pre, n_post), w0, dtype)
+    xs = tuple(jnp.asarray(a, dtype) for a in (pre[1:], post[1:], dopa[1:])) + (
+        jnp.asarray(mask[:-1]),
+        jnp.asarray(value[:-1], dtype),
+    )
+    _, (ws, cs, ns) = jax.jit(lambda c, x: jax.lax.scan(body, c, x))((w, rule.init(w)), xs)
+    return np.asarray(ws), np.asarray(cs), np.asarray(ns)
 
 
 # --------------------------------------------------------------------------------------------
@@ -93,14 +119,17 @@ def test_simultaneous_pre_and_arrival_do_not_pair(x64):
     assert np.all(cs == 0.0)
 
 
-def test_dw_keeps_weights_in_bounds_and_every_parameter_is_traced():
-    rule = rstdp(3, 2, delay_steps=2)
+@pytest.mark.parametrize("schedule", ["exact", "nest"])
+def test_dw_keeps_weights_in_bounds_and_every_parameter_is_traced(schedule):
+    rule = rstdp(3, 2, delay_steps=2, schedule="exact")
     w = jnp.full((3, 2), 5.0)
     p = rstdp_params(Wmax=5.2, Wmin=4.9)
     s = rule.init(w)._replace(c=jnp.array([[1.0, -1.0]] * 3), n=jnp.array([100.0, 100.0]))
     dw, _ = rule.update(p, s, w, jnp.zeros(3), jnp.zeros(2), 0.0, 0.1)
     np.testing.assert_allclose(np.asarray(w + dw), [[5.2, 4.9]] * 3, rtol=1e-6)
 
+    rule = rstdp(3, 2, delay_steps=2, schedule=schedule)
+    s = rule.init(w)
     traces = []
 
     def run(params):
@@ -131,6 +160,10 @@ def test_bad_input():
         rstdp_params(Wmin=3.0, Wmax=1.0)
     with pytest.raises(UserError):
         rstdp(2, 2).init(jnp.zeros((3, 2)))
+    with pytest.raises(UserError):
+        rstdp(2, 2, schedule="lazy")
+    with pytest.raises(UserError):
+        rstdp(2, 2, delay_steps=5, min_delay_steps=6)
     with pytest.raises(UserError):
         replay({}, [0.05], [], [], w0=1.0, t_sim_ms=10.0)
     with pytest.raises(UserError):
@@ -331,3 +364,89 @@ def test_time_driven_rule_equals_nest_with_dopamine_spikes(x64):
     compare(cs[steps - 2, 0, 0], c, "c")
     compare(ns[steps - 2, 0], n, "n")
     assert np.all(cs[:, 0, 1] <= 0.0)  # no post spikes: depression only
+
+
+def dense(rng, t_sim, n, lo=1.1):
+    """``n`` spike times on the 0.1 ms grid in ``[lo, t_sim)``, repeats allowed (multiplicities)."""
+    return sorted(round(float(t), 1) for t in rng.choice(np.arange(int(lo / H), int(t_sim / H)) * H, n))
+
+
+def test_nest_schedule_equals_nest_with_n_set_each_control_step(x64):
+    # The authors' mode, spikes anywhere and dense: SetStatus({"n": r}) every 20 ms for 60 control steps,
+    # NEST read after every millisecond and at every control step, the rule after every step.
+    rng = np.random.default_rng(5)
+    n_ctrl, per = 60, 200
+    t_sim = n_ctrl * per * H
+    pre, post = dense(rng, t_sim, 400), dense(rng, t_sim, 300)
+    rewards = rng.normal(0.0, 0.2, n_ctrl)
+    n_set = [(k * per * H, rewards[k]) for k in range(n_ctrl)]
+    params = {"tau_c": 400.0, "tau_n": 200.0, "A_plus": 0.1, "A_minus": 0.12, "Wmax": 60.0, "Wmin": 40.0}
+    n_steps = n_ctrl * per
+    record = list(range(5, n_steps + 1, 10))
+    steps, w, c, n = nest_run(params, pre, post, [], w0=50.0, t_sim=t_sim, n_set=n_set, record=record)
+    counts = lambda ts: {
+        k: [float(v)] for k, v in zip(*np.unique(np.rint(np.array(ts) / H).astype(int), return_counts=True))
+    }  # noqa: E731
+    ws, cs, ns = drive(
+        rstdp_params(**params, dtype=jnp.float64),
+        counts(pre),
+        counts(post),
+        n_steps,
+        w0=50.0,
+        n_set={int(round(t / H)): r for t, r in n_set},
+        schedule="nest",
+    )
+    compare(ws[steps - 1, 0, 0], w, "w")
+    compare(cs[steps - 1, 0, 0], c, "c")
+    assert np.ptp(w) > 1.0
+    # The exact-time rule tells another story here: NEST's schedule matters for dense spikes.
+    wx, _, _ = drive(
+        rstdp_params(**params, dtype=jnp.float64),
+        counts(pre),
+        counts(post),
+        n_steps,
+        w0=50.0,
+        n_set={int(round(t / H)): r for t, r in n_set},
+    )
+    assert np.max(np.abs(wx[steps - 1, 0, 0] - w)) > 1e-3
+
+
+@pytest.mark.parametrize("deliver_interval", [1, 2])
+def test_nest_schedule_group_equals_replay_with_dopamine_spikes(x64, deliver_interval):
+    # A 3 x 2 group, dopamine through the volume transmitter, b > 0, clipping: every synapse against
+    # its own replay (replay being NEST's, as the tests above show), at every step.
+    rng = np.random.default_rng(13)
+    t_sim, n_pre, n_post = 120.0, 3, 2
+    pres = [dense(rng, t_sim, 30) for _ in range(n_pre)]
+    posts = [dense(rng, t_sim, 25) for _ in range(n_post)]
+    dopa = dense(rng, t_sim - 2, 20)
+    params = {"tau_c": 200.0, "tau_n": 30.0, "b": 0.01, "Wmax": 11.0, "Wmin": 9.5}
+    n_steps = int(round(t_sim / H))
+    pre_steps, post_steps = {}, {}
+    for i, ts in enumerate(pres):
+        for t in ts:
+            pre_steps.setdefault(int(round(t / H)), np.zeros(n_pre))[i] += 1
+    for j, ts in enumerate(posts):
+        for t in ts:
+            post_steps.setdefault(int(round(t / H)), np.zeros(n_post))[j] += 1
+    ws, cs, _ = drive(
+        rstdp_params(**params, dtype=jnp.float64),
+        pre_steps,
+        post_steps,
+        n_steps,
+        n_pre=n_pre,
+        n_post=n_post,
+        dopa_steps=[int(round((t + D) / H)) for t in dopa],
+        schedule="nest",
+        deliver_interval=deliver_interval,
+    )
+    hit = False
+    for i in range(n_pre):
+        for j in range(n_post):
+            _, rw, rc, _ = replay(
+                params, pres[i], posts[j], dopa, w0=10.0, t_sim_ms=t_sim, deliver_interval=deliver_interval
+            )
+            compare(ws[:, i, j], rw, f"w[{i},{j}]")
+            compare(cs[:, i, j], rc, f"c[{i},{j}]")
+            hit |= bool(np.any(rw == 11.0) or np.any(rw == 9.5))
+    assert hit

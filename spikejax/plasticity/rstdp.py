@@ -193,7 +193,15 @@ def _advance(w, c, n, delta, p, xp):
     return w, c * xp.exp(-delta / p.tau_c), n * xp.exp(-delta / p.tau_n)
 
 
-def rstdp(n_pre: int, n_post: int, *, delay_steps: int = 10) -> PlasticityRule:
+def rstdp(
+    n_pre: int,
+    n_post: int,
+    *,
+    delay_steps: int = 10,
+    schedule: str = "nest",
+    min_delay_steps: int | None = None,
+    deliver_interval: int = 1,
+) -> PlasticityRule:
     """The time-driven R-STDP rule of Eq. (6)-(8) of the snake R-STDP paper for a dense group.
 
     One ``update`` is one neural step of length ``dt`` ending at ``t``: the step's
@@ -241,9 +249,22 @@ def rstdp(n_pre: int, n_post: int, *, delay_steps: int = 10) -> PlasticityRule:
         >>> round(float(s.c[0, 0]), 6)  # the post spike of 0.2 ms arrives at 0.3 ms
         0.99005
     """
-    for name, v in (("n_pre", n_pre), ("n_post", n_post), ("delay_steps", delay_steps)):
+    md = delay_steps if min_delay_steps is None else min_delay_steps
+    for name, v in (
+        ("n_pre", n_pre),
+        ("n_post", n_post),
+        ("delay_steps", delay_steps),
+        ("min_delay_steps", md),
+        ("deliver_interval", deliver_interval),
+    ):
         if not isinstance(v, (int, np.integer)) or v < 1:
             raise UserError(f"rstdp: {name} must be an integer >= 1, got {v!r}")
+    if md > delay_steps:
+        raise UserError(f"rstdp: min_delay_steps {md} is above delay_steps {delay_steps}")
+    if schedule == "nest":
+        return _nest_schedule_rule(n_pre, n_post, delay_steps, md, deliver_interval)
+    if schedule != "exact":
+        raise UserError(f"rstdp: schedule must be 'nest' or 'exact', got {schedule!r}")
 
     def init(weights: jax.Array) -> RSTDPState:
         if weights.shape != (n_pre, n_post):
@@ -490,3 +511,175 @@ def replay(
             syn.trigger(s * h)
         out[:, s - 1] = syn.w, syn.c, syn.n
     return np.arange(1, n_steps + 1) * h, out[0], out[1], out[2]
+
+
+class RSTDPNestState(NamedTuple):
+    """State of a group of R-STDP synapses on NEST's schedule (`rstdp` with ``schedule="nest"``).
+
+    NEST updates a synapse lazily; these are its stored values, plus the recent
+    spikes it will read back.
+
+    Attributes:
+        k_plus: ``(n_pre,)`` ``K_plus`` at each presynaptic neuron's last update point.
+        k_minus: ``(n_post,)`` the postsynaptic traces after this step's spikes (not delayed).
+        c: ``(n_pre, n_post)`` eligibility at each row's last update point.
+        n: ``(n_post,)`` dopamine at the last volume-transmitter trigger.
+        step: index of the last step run (0 before the first).
+        t_last: ``(n_pre,)`` step of each row's last update point.
+        t_trig: step of the last trigger.
+        post_hist: ``(H, n_post)`` post spike counts of the last ``H`` steps, newest last.
+        kminus_hist: ``(H, n_post)`` the post traces after each of those steps.
+        dopa_hist: ``(H,)`` dopamine spikes reaching the volume transmitter in those steps.
+        pre_hist: ``(min_delay_steps, n_pre)`` pre spike counts of the current slice, newest last.
+    """
+
+    k_plus: jax.Array
+    k_minus: jax.Array
+    c: jax.Array
+    n: jax.Array
+    step: jax.Array
+    t_last: jax.Array
+    t_trig: jax.Array
+    post_hist: jax.Array
+    kminus_hist: jax.Array
+    dopa_hist: jax.Array
+    pre_hist: jax.Array
+
+
+def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
+    """`rstdp` on NEST's schedule; see `rstdp`."""
+    span = (di + 1) * md  # the longest stretch one lazy update covers, steps
+    hlen = span + delay_steps + md + 1
+
+    def init(weights):
+        if weights.shape != (n_pre, n_post):
+            raise UserError(f"rstdp: weights of shape {weights.shape}, expected {(n_pre, n_post)}")
+        dtype = weights.dtype if jnp.issubdtype(weights.dtype, jnp.floating) else jnp.float32
+        z = jnp.zeros
+        return RSTDPNestState(
+            k_plus=z((n_pre,), dtype),
+            k_minus=z((n_post,), dtype),
+            c=z((n_pre, n_post), dtype),
+            n=z((n_post,), dtype),
+            step=jnp.zeros((), jnp.int32),
+            t_last=z((n_pre,), jnp.int32),
+            t_trig=jnp.zeros((), jnp.int32),
+            post_hist=z((hlen, n_post), dtype),
+            kminus_hist=z((hlen, n_post), dtype),
+            dopa_hist=z((hlen,), dtype),
+            pre_hist=z((md, n_pre), dtype),
+        )
+
+    def hist_at(hist, newest, x):
+        """Rows of ``hist`` (newest last, the newest being step ``newest``) at steps ``x``; 0 outside."""
+        i = hlen - 1 - (newest - x)
+        ok = (i >= 0) & (i < hlen)
+        return jnp.where(ok.reshape(ok.shape + (1,) * (hist.ndim - 1)), hist[jnp.clip(i, 0, hlen - 1)], 0.0)
+
+    def lazy_forward(p, s, w, c, rows, t1, newest, dt):
+        """NEST's update of ``rows`` from their ``t_last`` to step ``t1`` (>= t_last): facilitation
+        at post arrivals, dopamine pieces, clipping at each piece's end (process_dopa_spikes_)."""
+        base = t1 - span
+        g = base + jnp.arange(1, span + 1)  # (span,) grid steps, the window's ends
+        dopa = hist_at(s.dopa_hist, newest, g) * (g > s.t_trig)
+        n_prev = _n_at(s, g - 1, newest, dt, p)  # (span, n_post): n over the piece ending at g
+        arrivals = hist_at(s.post_hist, newest, g - delay_steps)  # (span, n_post)
+        decay_c = jnp.exp(-dt / p.tau_c)
+
+        def body(carry, x):
+            w, c = carry
+            gi, n0, arr, dflag = x
+            active = rows & (s.t_last < gi) & (gi <= t1)  # (n_pre,)
+            a = active[:, None]
+            w = jnp.where(a, w + _weight_piece(c, n0[None, :], dt, p, jnp), w)
+            c = jnp.where(a, c * decay_c, c)
+            kp = s.k_plus * jnp.exp(-(gi - s.t_last).astype(c.dtype) * dt / p.tau_plus)
+            c = jnp.where(a, c + p.A_plus * kp[:, None] * arr[None, :], c)
+            clip = a & ((arr[None, :] > 0) | (dflag > 0) | (gi == t1))
+            w = jnp.where(clip, jnp.clip(w, p.Wmin, p.Wmax), w)
+            return (w, c), None
+
+        (w, c), _ = jax.lax.scan(body, (w, c), (g, n_prev, arrivals, dopa))
+        return w, c
+
+    def send(p, s, w, c, k_plus, t_last, m, tk, newest, dt):
+        """NEST's stdp_dopamine_synapse::send for the rows with ``m`` > 0 spikes at step ``tk``."""
+        rows = m > 0
+        fwd = rows & (tk >= t_last)
+        s_rows = s._replace(k_plus=k_plus, t_last=t_last)
+        w, c = lazy_forward(p, s_rows, w, c, fwd, tk, newest, dt)
+        # Delivered after the trigger at t_trig > tk: integrate back from t_trig (= t_last) to tk.
+        back = rows & (tk < t_last)
+        span_b = (tk - t_last).astype(c.dtype) * dt
+        n0 = _n_at(s, t_last, newest, dt, p)
+        wb = jnp.clip(w + _weight_piece(c, n0, span_b[:, None], p, jnp), p.Wmin, p.Wmax)
+        w = jnp.where(back[:, None], wb, w)
+        c = jnp.where(back[:, None], c * jnp.exp(-span_b[:, None] / p.tau_c), c)
+        # Depression with K_minus of the post spikes emitted strictly before tk - d.
+        k_before = hist_at(s.kminus_hist, newest, tk - delay_steps - 1) * jnp.exp(-dt / p.tau_minus)
+        c = c - p.A_minus * m[:, None] * k_before[None, :]
+        dtk = (tk - t_last).astype(c.dtype) * dt
+        k_plus = jnp.where(rows, k_plus * jnp.exp(-dtk / p.tau_plus) + m, k_plus)
+        t_last = jnp.where(rows, tk, t_last)
+        return w, c, k_plus, t_last
+
+    def deliver(p, s, w, dt):
+        """At the start of a slice: the pre spikes of the previous slice, in time order."""
+        newest = s.step
+        w, c, k_plus, t_last = w, s.c, s.k_plus, s.t_last
+        for k in range(md):
+            tk = s.step - md + 1 + k
+            w, c, k_plus, t_last = send(p, s, w, c, k_plus, t_last, s.pre_hist[k], tk, newest, dt)
+        return w, s._replace(c=c, k_plus=k_plus, t_last=t_last)
+
+    def trigger(p, s, w, dt):
+        """The volume transmitter's trigger at the end of a slice: every row brought to now."""
+        now = s.step
+        rows = jnp.ones((n_pre,), bool)
+        w, c = lazy_forward(p, s, w, s.c, rows, now, now, dt)
+        n = _n_at(s, now[None], now, dt, p)[0]
+        dtk = (now - s.t_last).astype(c.dtype) * dt
+        return w, s._replace(
+            c=c,
+            n=n.astype(c.dtype),
+            k_plus=s.k_plus * jnp.exp(-dtk / p.tau_plus),
+            t_last=jnp.full_like(s.t_last, now),
+            t_trig=now,
+        )
+
+    def update(params, state, weights, pre, post, dopamine, dt):
+        s = state
+        dtype = s.c.dtype
+        pre = jnp.asarray(pre, dtype)
+        post = jnp.asarray(post, dtype)
+        w = weights.astype(dtype)
+        # Start of step s.step + 1: deliver the previous slice's pre spikes when a slice begins.
+        starts = (s.step % md == 0) & (s.step > 0)
+        w, s = jax.lax.cond(starts, lambda a: deliver(params, a[1], a[0], dt), lambda a: a, (w, s))
+        step = s.step + 1
+        k_minus = s.k_minus * jnp.exp(-dt / params.tau_minus) + post
+        s = s._replace(
+            step=step,
+            k_minus=k_minus,
+            post_hist=jnp.concatenate([s.post_hist[1:], post[None]]),
+            kminus_hist=jnp.concatenate([s.kminus_hist[1:], k_minus[None]]),
+            dopa_hist=jnp.concatenate([s.dopa_hist[1:], jnp.asarray(dopamine, dtype)[None]]),
+            pre_hist=jnp.concatenate([s.pre_hist[1:], pre[None]]),
+        )
+        w, s = jax.lax.cond(step % (di * md) == 0, lambda a: trigger(params, a[1], a[0], dt), lambda a: a, (w, s))
+        return (w - weights).astype(weights.dtype), s
+
+    return PlasticityRule(init, update)
+
+
+def _n_at(s, t, newest, dt, p):
+    """Dopamine at steps ``t`` (shape ``(k,)``) as NEST's synapses see it, ``(k, n_post)``: ``n`` at the
+    last trigger, decayed (or extrapolated back), plus the dopamine spikes since that trigger up to ``t``.
+    ``dopa_hist`` ends at step ``newest``."""
+    hlen = s.dopa_hist.shape[0]
+    x = newest - jnp.arange(hlen)[::-1]  # the steps of dopa_hist
+    lag = (t[:, None] - x[None, :]).astype(s.c.dtype)
+    take = (x[None, :] > s.t_trig) & (lag >= 0)
+    extra = jnp.sum(jnp.where(take, s.dopa_hist[None, :] * jnp.exp(-jnp.where(take, lag, 0.0) * dt / p.tau_n), 0.0), 1)
+    decay = jnp.exp(-(t - s.t_trig).astype(s.c.dtype) * dt / p.tau_n)
+    return s.n[None, :] * decay[:, None] + (extra / p.tau_n)[:, None]
