@@ -201,6 +201,8 @@ def rstdp(
     schedule: str = "nest",
     min_delay_steps: int | None = None,
     deliver_interval: int = 1,
+    max_delay_steps: int | None = None,
+    n_incoming: int | None = None,
 ) -> PlasticityRule:
     """The time-driven R-STDP rule of Eq. (6)-(8) of the snake R-STDP paper for a dense group.
 
@@ -261,8 +263,12 @@ def rstdp(
             raise UserError(f"rstdp: {name} must be an integer >= 1, got {v!r}")
     if md > delay_steps:
         raise UserError(f"rstdp: min_delay_steps {md} is above delay_steps {delay_steps}")
+    max_delay = delay_steps if max_delay_steps is None else max_delay_steps
+    n_in = n_pre if n_incoming is None else n_incoming
+    if max_delay < delay_steps or n_in < n_pre:
+        raise UserError(f"rstdp: max_delay_steps {max_delay} below delay_steps or n_incoming {n_in} below n_pre")
     if schedule == "nest":
-        return _nest_schedule_rule(n_pre, n_post, delay_steps, md, deliver_interval)
+        return _nest_schedule_rule(n_pre, n_post, delay_steps, md, deliver_interval, max_delay, n_in)
     if schedule != "exact":
         raise UserError(f"rstdp: schedule must be 'nest' or 'exact', got {schedule!r}")
 
@@ -527,7 +533,9 @@ class RSTDPNestState(NamedTuple):
         step: index of the last step run (0 before the first).
         t_last: ``(n_pre,)`` step of each row's last update point.
         t_trig: step of the last trigger.
-        post_hist: ``(H, n_post)`` post spike counts of the last ``H`` steps, newest last.
+        post_hist: ``(H, n_post)`` post spike counts of the last ``H`` steps, newest last, less
+            the entries NEST has pruned from the neuron's history.
+        access: ``(H, n_post)`` how often synapses have read each of those history entries.
         kminus_hist: ``(H, n_post)`` the post traces after each of those steps.
         dopa_hist: ``(H,)`` dopamine spikes reaching the volume transmitter in those steps.
         pre_hist: ``(min_delay_steps, n_pre)`` pre spike counts of the current slice, newest last.
@@ -541,15 +549,17 @@ class RSTDPNestState(NamedTuple):
     t_last: jax.Array
     t_trig: jax.Array
     post_hist: jax.Array
+    access: jax.Array
     kminus_hist: jax.Array
     dopa_hist: jax.Array
     pre_hist: jax.Array
 
 
-def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
+def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incoming):
     """`rstdp` on NEST's schedule; see `rstdp`."""
     span = (di + 1) * md  # the longest stretch one lazy update covers, steps
-    hlen = span + delay_steps + md + 1
+    keep = max_delay + md  # ArchivingNode prunes an entry once the next is more than this old
+    hlen = max(span + delay_steps + md, keep + 1) + 1
 
     def init(weights):
         if weights.shape != (n_pre, n_post):
@@ -565,6 +575,7 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
             t_last=z((n_pre,), jnp.int32),
             t_trig=jnp.zeros((), jnp.int32),
             post_hist=z((hlen, n_post), dtype),
+            access=z((hlen, n_post), dtype),
             kminus_hist=z((hlen, n_post), dtype),
             dopa_hist=z((hlen,), dtype),
             pre_hist=z((md, n_pre), dtype),
@@ -600,14 +611,19 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
             return (w, c), None
 
         (w, c), _ = jax.lax.scan(body, (w, c), (g, n_prev, arrivals, dopa))
-        return w, c
+        # get_history marks the entries it read, emitted in (t_last - d, t1 - d].
+        x = newest - jnp.arange(hlen)[::-1]
+        read = rows[None, :] & (s.t_last[None, :] - delay_steps < x[:, None]) & (x[:, None] <= t1 - delay_steps)
+        access = s.access + jnp.sum(read, axis=1, dtype=c.dtype)[:, None] * (s.post_hist > 0)
+        return w, c, access
 
     def send(p, s, w, c, k_plus, t_last, m, tk, newest, dt):
         """NEST's stdp_dopamine_synapse::send for the rows with ``m`` > 0 spikes at step ``tk``."""
         rows = m > 0
         fwd = rows & (tk >= t_last)
         s_rows = s._replace(k_plus=k_plus, t_last=t_last)
-        w, c = lazy_forward(p, s_rows, w, c, fwd, tk, newest, dt)
+        w, c, access = lazy_forward(p, s_rows, w, c, fwd, tk, newest, dt)
+        s = s._replace(access=access)
         # Delivered after the trigger at t_trig > tk: integrate back from t_trig (= t_last) to tk.
         back = rows & (tk < t_last)
         span_b = (tk - t_last).astype(c.dtype) * dt
@@ -621,7 +637,7 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
         dtk = (tk - t_last).astype(c.dtype) * dt
         k_plus = jnp.where(rows, k_plus * jnp.exp(-dtk / p.tau_plus) + m, k_plus)
         t_last = jnp.where(rows, tk, t_last)
-        return w, c, k_plus, t_last
+        return w, c, k_plus, t_last, s
 
     def deliver(p, s, w, dt):
         """At the start of a slice: the pre spikes of the previous slice, in time order."""
@@ -629,23 +645,41 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
         w, c, k_plus, t_last = w, s.c, s.k_plus, s.t_last
         for k in range(md):
             tk = s.step - md + 1 + k
-            w, c, k_plus, t_last = send(p, s, w, c, k_plus, t_last, s.pre_hist[k], tk, newest, dt)
+            w, c, k_plus, t_last, s = send(p, s, w, c, k_plus, t_last, s.pre_hist[k], tk, newest, dt)
         return w, s._replace(c=c, k_plus=k_plus, t_last=t_last)
 
     def trigger(p, s, w, dt):
         """The volume transmitter's trigger at the end of a slice: every row brought to now."""
         now = s.step
         rows = jnp.ones((n_pre,), bool)
-        w, c = lazy_forward(p, s, w, s.c, rows, now, now, dt)
+        w, c, access = lazy_forward(p, s, w, s.c, rows, now, now, dt)
         n = _n_at(s, now[None], now, dt, p)[0]
         dtk = (now - s.t_last).astype(c.dtype) * dt
         return w, s._replace(
             c=c,
+            access=access,
             n=n.astype(c.dtype),
             k_plus=s.k_plus * jnp.exp(-dtk / p.tau_plus),
             t_last=jnp.full_like(s.t_last, now),
             t_trig=now,
         )
+
+    def prune(hist, access, t, newest):
+        """ArchivingNode::set_spiketime at step ``t``: drops history entries, oldest first, while the oldest
+        has been read by every incoming synapse and the entry after it is more than ``keep`` steps old."""
+        x = newest - jnp.arange(hlen)[::-1]
+        nonempty = hist > 0
+        big = jnp.iinfo(jnp.int32).max
+        later = jnp.where(nonempty, x[:, None], big)
+        # the step of the next non-empty slot after each slot
+        nxt = jnp.concatenate([jax.lax.cummin(later[::-1], axis=0)[::-1][1:], jnp.full((1, hist.shape[1]), big)])
+        read = access >= n_incoming
+        old = t - keep - 1
+        pop_all = nonempty & read & (nxt <= old)
+        pop_but_one = nonempty & read & (x[:, None] <= old)
+        free = jnp.cumprod((pop_all | ~nonempty).astype(jnp.int32), axis=0)
+        reach = jnp.concatenate([jnp.ones((1, hist.shape[1]), jnp.int32), free[:-1]]) > 0
+        return jnp.where(reach & pop_all, 0.0, jnp.where(reach & pop_but_one, jnp.minimum(hist, 1.0), hist))
 
     def update(params, state, weights, pre, post, dopamine, dt):
         s = state
@@ -658,10 +692,12 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di):
         w, s = jax.lax.cond(starts, lambda a: deliver(params, a[1], a[0], dt), lambda a: a, (w, s))
         step = s.step + 1
         k_minus = s.k_minus * jnp.exp(-dt / params.tau_minus) + post
+        hist = jnp.where(post[None, :] > 0, prune(s.post_hist, s.access, step, s.step), s.post_hist)
         s = s._replace(
             step=step,
             k_minus=k_minus,
-            post_hist=jnp.concatenate([s.post_hist[1:], post[None]]),
+            post_hist=jnp.concatenate([hist[1:], post[None]]),
+            access=jnp.concatenate([s.access[1:], jnp.zeros_like(post)[None]]),
             kminus_hist=jnp.concatenate([s.kminus_hist[1:], k_minus[None]]),
             dopa_hist=jnp.concatenate([s.dopa_hist[1:], jnp.asarray(dopamine, dtype)[None]]),
             pre_hist=jnp.concatenate([s.pre_hist[1:], pre[None]]),
