@@ -6,7 +6,7 @@
 
 from spikejax.plasticity.base import PlasticityRule
 from spikejax.plasticity.hebbian import RewardHebbianParams, RewardHebbianState, reward_modulated_hebbian, row_increment
-from spikejax.plasticity.rstdp import RSTDPParams, RSTDPState, replay, rstdp, rstdp_params, set_dopamine
+from spikejax.plasticity.rstdp import RSTDPNestState, RSTDPParams, RSTDPState, replay, rstdp, rstdp_params, set_dopamine
 from spikejax.plasticity.supervised import StochasticSupervisedParams, stochastic_supervised
 
 __all__ = [
@@ -17,6 +17,7 @@ __all__ = [
     "row_increment",
     "RSTDPParams",
     "RSTDPState",
+    "RSTDPNestState",
     "rstdp",
     "rstdp_params",
     "set_dopamine",

@@ -1,17 +1,8 @@
 """Reward-modulated STDP, Eq. (6)-(8) of the snake R-STDP paper, as NEST 3.10's ``stdp_dopamine_synapse``.
 
 The paper ran its networks in NEST, so its R-STDP is NEST's ``stdp_dopamine_synapse``
-(Potjans et al. 2010). This module gives it twice, from the same maths (`_advance`,
-`_weight_piece`):
-
-* `rstdp`: a time-driven rule, one update per neural step for a dense group of
-  synapses, written for one instance (``vmap`` adds snakes and parameter sets).
-  It integrates the model exactly (closed form per step), every spike at its own
-  time.
-* `replay`: NEST's own event schedule for one synapse, lazy update points and all,
-  for checking against NEST to 1e-6 and for measuring what the schedule changes.
-
-The model, NEST's names and units (ms; weights in NEST units, ``dw/dt`` per ms):
+(Potjans et al. 2010). The model, in NEST's names and units (ms; weights in NEST
+units, ``dw/dt`` per ms):
 
 * pre trace ``K_plus``: +1 per presynaptic spike, decays with ``tau_plus``;
 * post trace ``K_minus``: +1 per postsynaptic spike, decays with ``tau_minus`` (in
@@ -29,25 +20,36 @@ The model, NEST's names and units (ms; weights in NEST units, ``dw/dt`` per ms):
   form over each interval without spikes (`_weight_piece`) and clipped to
   ``[Wmin, Wmax]`` after each interval.
 
-Where the time-driven rule and NEST part (`replay` reproduces all of it):
+NEST does not integrate this model at every spike's own time. It updates a synapse
+lazily, at its update points, and the order of those points changes the result:
 
-1. Clipping. NEST clips only at its update points (pre spikes, post arrivals and
-   dopamine spikes inside an update, and the volume transmitter's triggers every
-   ``deliver_interval * min_delay``); `rstdp` clips after every step. They agree
-   unless the weight sits at a bound while ``c (n - b)`` changes sign between two
-   update points, which needs ``b > 0`` and ``n`` decaying through ``b``.
-2. Delivery order. NEST delivers a spike emitted in a min-delay slice at the start
-   of the next slice, after the volume transmitter's trigger at the end of the
-   slice. A pre spike at ``t`` inside such a slice is then processed after the
-   synapse has already been brought to the trigger time ``T > t``: NEST integrates
-   ``w``, ``c`` and ``K_plus`` back from ``T`` to ``t`` (``n`` included, so a dopamine
-   spike or a ``SetStatus`` of ``n`` in ``(t, T]`` acts as if it came before ``t``), and a
-   post arrival in ``(t, T]`` is paired twice: once at the trigger without this pre
-   spike, once at the next update point with it (NEST reads that stretch of the post
-   history again, unless it was pruned). A pre spike exactly at a slice end
-   (``t = T``) is exact. So `rstdp` equals NEST when every pre spike lands on a
-   multiple of the min delay (1 ms for 1 ms delays), up to the clipping of point 1;
-   otherwise the two differ by these terms, which `replay` measures.
+1. Delivery order. A spike emitted in a min-delay slice ``(T - min_delay, T]`` is
+   delivered (its synapses updated) at the start of the next slice, after the volume
+   transmitter's trigger at ``T`` (every ``deliver_interval * min_delay``) has brought
+   every synapse to ``T``. The pre spike at ``t < T`` then integrates ``w``, ``c`` and
+   ``K_plus`` back from ``T`` to ``t`` (with ``n`` of ``T`` extrapolated back, so a dopamine
+   spike or a ``SetStatus`` of ``n`` in ``(t, T]`` acts as if before ``t``), and a post
+   arrival in ``(t, T]``, paired at the trigger without this pre spike, is paired again
+   with it at the next update point: NEST reads that stretch of the post history twice.
+2. History pruning. The postsynaptic neuron drops a history entry once every incoming
+   STDP synapse has read it and the next entry is more than ``max_delay + min_delay``
+   older than a new post spike; a pruned entry is not read twice.
+3. Clipping only at the ends of NEST's pieces (dopamine spikes, post arrivals, update
+   points), not in between.
+
+With dense spikes (hundreds of Hz, as the snake's inputs) these are not small: the
+eligibility can grow several-fold over the exact-time model. So this module gives:
+
+* `rstdp` with ``schedule="nest"`` (default): a time-driven rule, one update per
+  neural step for a dense group, that performs NEST's update points at NEST's steps
+  (delivery at slice starts, triggers at slice ends, pruning), and so equals NEST's
+  ``GetStatus`` of every connection at every step to rounding;
+* `rstdp` with ``schedule="exact"``: the model itself, every spike at its own time,
+  closed form per step, clipping every step; equal to NEST when every pre spike falls
+  on a slice end (a multiple of the min delay), up to point 3;
+* `replay`: NEST's schedule for one synapse as an event loop in float64, written from
+  NEST's source independently of the time-driven code (but with the same maths,
+  `_advance`), to check both against NEST.
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ import numpy as np
 from spikejax.errors import UserError
 from spikejax.plasticity.base import PlasticityRule
 
-__all__ = ["RSTDPParams", "RSTDPState", "rstdp_params", "rstdp", "set_dopamine", "replay"]
+__all__ = ["RSTDPParams", "RSTDPState", "RSTDPNestState", "rstdp_params", "rstdp", "set_dopamine", "replay"]
 
 _NEST_DEFAULTS = {
     "A_plus": 1.0,
@@ -206,30 +208,50 @@ def rstdp(
 ) -> PlasticityRule:
     """The time-driven R-STDP rule of Eq. (6)-(8) of the snake R-STDP paper for a dense group.
 
-    One ``update`` is one neural step of length ``dt`` ending at ``t``: the step's
-    spikes are stamped ``t`` (as NEST stamps them). In order:
+    One ``update`` is one neural step of length ``dt`` ending at ``t``; the step's spikes
+    are stamped ``t`` (as NEST stamps them). Spike counts above 1 act as that many
+    spikes at the same time (NEST unrolls multiplicities).
 
-    1. post spikes emitted ``delay_steps`` steps ago arrive;
-    2. ``w``, ``c``, ``n`` and both traces advance over ``dt`` in closed form (`_advance`),
-       ``w`` clipped to ``[Wmin, Wmax]``;
-    3. each arrival raises ``c`` by ``A_plus * K_plus`` (pre spikes before ``t``);
-    4. each pre spike lowers ``c`` by ``A_minus * K_minus`` (post spikes emitted
-       before ``t - d``);
-    5. ``K_plus += pre``, ``K_minus += arrivals``, ``n += dopamine / tau_n``.
+    ``schedule="exact"``, per step: (1) post spikes emitted ``delay_steps`` steps ago
+    arrive; (2) ``w``, ``c``, ``n`` and both traces advance over ``dt`` in closed form
+    (`_advance`), ``w`` clipped; (3) each arrival raises ``c`` by ``A_plus * K_plus``
+    (pre spikes before ``t``); (4) each pre spike lowers ``c`` by ``A_minus * K_minus``
+    (post spikes emitted before ``t - d``); (5) ``K_plus += pre``, ``K_minus +=
+    arrivals``, ``n += dopamine / tau_n``. ``state.c`` is the eligibility at ``t``.
 
-    A pre spike and a post arrival in the same step do not pair (as in NEST). Spike
-    counts above 1 act as that many spikes at the same time (NEST unrolls
-    multiplicities). The module docstring says where this differs from NEST's
-    schedule (clipping between update points, late delivery inside a min-delay slice).
+    ``schedule="nest"``, per step: at the start of a min-delay slice, NEST's ``send``
+    for each pre spike of the previous slice, in time order; the post spikes of the
+    step enter the post history (pruning it); at the end of every ``deliver_interval``
+    slices, NEST's ``trigger_update_weight`` for every synapse. ``weights + dw`` and
+    ``state.c`` are then NEST's stored weight and ``c`` (``GetStatus``) after
+    ``Simulate`` up to ``t``, and ``state.n`` is ``n`` at the last trigger. The weight
+    NEST transmits a pre spike with is the one after that spike's delivery, one slice
+    later. Steps at slice starts do ``min_delay_steps`` short scans; under ``vmap``
+    every step pays for them.
+
+    `set_dopamine` acts like ``SetStatus({"n": r})`` between two ``Simulate`` calls: on
+    the NEST schedule ``n`` is set as of the last trigger (NEST's ``n`` is referenced
+    there as long as no dopamine spike has been processed since), so set it at
+    trigger times (the authors' 20 ms control steps are) to set ``n`` itself.
 
     Args:
         n_pre: number of presynaptic neurons.
         n_post: number of postsynaptic neurons.
         delay_steps: the synapses' dendritic delay in neural steps (NEST's ``delay``
             divided by the resolution), >= 1.
+        schedule: ``"nest"`` (NEST's update points) or ``"exact"`` (every spike at its time).
+        min_delay_steps: NEST's min delay (of the whole network) in steps, default
+            ``delay_steps``; the slice length.
+        deliver_interval: the volume transmitter's ``deliver_interval``, in slices.
+        max_delay_steps: NEST's max delay (of the whole network) in steps, default
+            ``delay_steps``; sets when the post history is pruned.
+        n_incoming: STDP synapses onto each postsynaptic neuron, default ``n_pre`` (more
+            if the neuron has other plastic afferents); sets when the post history is
+            pruned.
 
     Returns:
-        ``PlasticityRule(init, update)``: ``init(weights) -> RSTDPState`` (all traces 0)
+        ``PlasticityRule(init, update)``: ``init(weights) -> state`` (`RSTDPState` for
+        ``"exact"``, `RSTDPNestState` for ``"nest"``; all traces 0)
         and ``update(params, state, weights, pre, post, dopamine, dt) -> (dw, state)``,
         ``weights`` and ``dw`` ``(n_pre, n_post)``, ``pre`` ``(n_pre,)`` and ``post``
         ``(n_post,)`` spike counts of this step, ``dopamine`` the scalar count of dopamine
@@ -238,10 +260,11 @@ def rstdp(
         ``[Wmin, Wmax]``.
 
     Raises:
-        UserError: a size below 1 or ``delay_steps`` below 1.
+        UserError: a size or step count below 1, ``min_delay_steps > delay_steps``,
+            ``max_delay_steps < delay_steps``, ``n_incoming < n_pre``, an unknown schedule.
 
     Examples:
-        >>> rule = rstdp(1, 1, delay_steps=1)
+        >>> rule = rstdp(1, 1, delay_steps=1, schedule="exact")
         >>> p = rstdp_params()
         >>> w = jnp.full((1, 1), 10.0)
         >>> s = rule.init(w)
@@ -305,12 +328,13 @@ def rstdp(
     return PlasticityRule(init, update)
 
 
-def set_dopamine(state: RSTDPState, n) -> RSTDPState:
-    """``state`` with the dopamine of every postsynaptic neuron overwritten by ``n``.
+def set_dopamine(state, n):
+    """``state`` (`RSTDPState` or `RSTDPNestState`) with every postsynaptic neuron's dopamine set to ``n``.
 
     The authors' group sets ``n`` on every connection once per control step
-    (``SetStatus(conns, {"n": r})``); call this between two `rstdp` updates at the
-    same point. ``n`` is a scalar or ``(n_post,)`` (the reward of each postsynaptic neuron).
+    (``SetStatus(conns, {"n": r})``); call this between two `rstdp` updates, where
+    ``SetStatus`` comes between two ``Simulate`` calls (see `rstdp` for the NEST
+    schedule). ``n`` is a scalar or ``(n_post,)`` (the reward of each postsynaptic neuron).
     """
     return state._replace(n=jnp.broadcast_to(jnp.asarray(n, state.n.dtype), state.n.shape))
 
@@ -429,7 +453,8 @@ def replay(
 ):
     """One NEST ``stdp_dopamine_synapse`` replayed on NEST 3.10's own schedule, in float64.
 
-    The network replayed: a presynaptic and a postsynaptic neuron (parrots, say) with
+    NEST's schedule and its consequences are in the module docstring. The network
+    replayed: a presynaptic and a postsynaptic neuron (parrots, say) with
     the plastic synapse between them (``delay_ms``; on a receptor that does not make
     the postsynaptic neuron fire), and a dopamine neuron connected to the synapse's
     volume transmitter (``dopa_delay_ms``). Neurons are created before the volume
@@ -437,9 +462,9 @@ def replay(
     slice ``(T - min_delay, T]``: the pre spikes of the previous slice are delivered
     (processed) at its start, post spikes are archived as they happen, and the volume
     transmitter collects dopamine and, when ``T`` is a multiple of
-    ``deliver_interval * min_delay``, brings every synapse to ``T``. The maths is the
-    time-driven rule's (`_advance`); what the schedule changes is listed in the module
-    docstring.
+    ``deliver_interval * min_delay``, brings every synapse to ``T``; the post history is
+    pruned as NEST prunes it (one incoming STDP synapse). The maths is the
+    time-driven rule's (`_advance`).
 
     Args:
         params: NEST's parameter names of the synapse model (``A_plus``, ``A_minus``,
