@@ -612,79 +612,80 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         ok = (i >= 0) & (i < hlen)
         return jnp.where(ok.reshape(ok.shape + (1,) * (hist.ndim - 1)), hist[jnp.clip(i, 0, hlen - 1)], 0.0)
 
-    def lazy_forward(p, s, w, c, rows, t1, newest, dt):
-        """NEST's update of ``rows`` from their ``t_last`` to step ``t1`` (>= t_last): facilitation
-        at post arrivals, dopamine pieces, clipping at each piece's end (process_dopa_spikes_)."""
-        base = t1 - span
-        g = base + jnp.arange(1, span + 1)  # (span,) grid steps, the window's ends
+    def sweep(p, s, w, c, k_plus, t_ref, rows, t1, pre_win, newest, dt):
+        """NEST's lazy update of ``rows`` from step ``t_ref`` to step ``t1`` (per row, ``t_ref <= t1``), over the
+        window of ``span`` steps ending at ``newest``: facilitation at post arrivals, dopamine pieces,
+        depression and ``K_plus`` at the pre spikes ``pre_win`` (``(span, n_pre)``, one ``send`` each),
+        ``w`` clipped at the end of every piece (process_dopa_spikes_)."""
+        g = newest - span + jnp.arange(1, span + 1, dtype=jnp.int32)  # (span,) grid steps, the ends of the pieces
         dopa = hist_at(s.dopa_hist, newest, g) * (g > s.t_trig)
         n_prev = _n_at(s, g - 1, newest, dt, p)  # (span, n_post): n over the piece ending at g
         arrivals = hist_at(s.post_hist, newest, g - delay_steps)  # (span, n_post)
+        # K_minus of the post spikes emitted strictly before g - d (ArchivingNode::get_K_value)
+        k_minus = hist_at(s.kminus_hist, newest, g - delay_steps - 1) * jnp.exp(-dt / p.tau_minus)
         decay_c = jnp.exp(-dt / p.tau_c)
 
         def body(carry, x):
-            w, c = carry
-            gi, n0, arr, dflag = x
-            active = rows & (s.t_last < gi) & (gi <= t1)  # (n_pre,)
+            w, c, k_plus, t_ref = carry
+            gi, n0, arr, dflag, km, m = x
+            active = rows & (t_ref < gi) & (gi <= t1)  # (n_pre,)
             a = active[:, None]
             w = jnp.where(a, w + _weight_piece(c, n0[None, :], dt, p, jnp), w)
-            c = jnp.where(a, c * decay_c, c)
-            kp = s.k_plus * jnp.exp(-(gi - s.t_last).astype(c.dtype) * dt / p.tau_plus)
-            c = jnp.where(a, c + p.A_plus * kp[:, None] * arr[None, :], c)
-            clip = a & ((arr[None, :] > 0) | (dflag > 0) | (gi == t1))
+            kp = k_plus * jnp.exp(-(gi - t_ref).astype(c.dtype) * dt / p.tau_plus)
+            c = jnp.where(a, c * decay_c + p.A_plus * kp[:, None] * arr[None, :], c)
+            spike = active & (m > 0)
+            clip = a & ((arr[None, :] > 0) | (dflag > 0) | spike[:, None] | (gi == t1)[:, None])
             w = jnp.where(clip, jnp.clip(w, p.Wmin, p.Wmax), w)
-            return (w, c), None
+            c = c - p.A_minus * jnp.where(spike, m, 0.0)[:, None] * km[None, :]
+            k_plus = jnp.where(spike, kp + m, k_plus)
+            t_ref = jnp.where(spike, gi, t_ref)
+            return (w, c, k_plus, t_ref), None
 
-        (w, c), _ = jax.lax.scan(body, (w, c), (g, n_prev, arrivals, dopa))
-        # get_history marks the entries it read, emitted in (t_last - d, t1 - d].
-        x = newest - jnp.arange(hlen)[::-1]
-        read = rows[None, :] & (s.t_last[None, :] - delay_steps < x[:, None]) & (x[:, None] <= t1 - delay_steps)
+        (w, c, k_plus, _), _ = jax.lax.scan(body, (w, c, k_plus, t_ref), (g, n_prev, arrivals, dopa, k_minus, pre_win))
+        # get_history marks the entries it read, emitted in (t_ref - d, t1 - d].
+        x = newest - jnp.arange(hlen, dtype=jnp.int32)[::-1]
+        read = rows[None, :] & (t_ref[None, :] - delay_steps < x[:, None]) & (x[:, None] <= t1[None, :] - delay_steps)
         access = s.access + jnp.sum(read, axis=1, dtype=c.dtype)[:, None] * (s.post_hist > 0)
-        return w, c, access
-
-    def send(p, s, w, c, k_plus, t_last, m, tk, newest, dt):
-        """NEST's stdp_dopamine_synapse::send for the rows with ``m`` > 0 spikes at step ``tk``."""
-        rows = m > 0
-        fwd = rows & (tk >= t_last)
-        s_rows = s._replace(k_plus=k_plus, t_last=t_last)
-        w, c, access = lazy_forward(p, s_rows, w, c, fwd, tk, newest, dt)
-        s = s._replace(access=access)
-        # Delivered after the trigger at t_trig > tk: integrate back from t_trig (= t_last) to tk.
-        back = rows & (tk < t_last)
-        span_b = (tk - t_last).astype(c.dtype) * dt
-        n0 = _n_at(s, t_last, newest, dt, p)
-        wb = jnp.clip(w + _weight_piece(c, n0, span_b[:, None], p, jnp), p.Wmin, p.Wmax)
-        w = jnp.where(back[:, None], wb, w)
-        c = jnp.where(back[:, None], c * jnp.exp(-span_b[:, None] / p.tau_c), c)
-        # Depression with K_minus of the post spikes emitted strictly before tk - d.
-        k_before = hist_at(s.kminus_hist, newest, tk - delay_steps - 1) * jnp.exp(-dt / p.tau_minus)
-        c = c - p.A_minus * m[:, None] * k_before[None, :]
-        dtk = (tk - t_last).astype(c.dtype) * dt
-        k_plus = jnp.where(rows, k_plus * jnp.exp(-dtk / p.tau_plus) + m, k_plus)
-        t_last = jnp.where(rows, tk, t_last)
-        return w, c, k_plus, t_last, s
+        return w, c, k_plus, access
 
     def deliver(p, s, w, dt):
-        """At the start of a slice: the pre spikes of the previous slice, in time order."""
+        """At the start of a slice: NEST's ``send`` for the pre spikes of the previous slice, in time order."""
         newest = s.step
-        w, c, k_plus, t_last = w, s.c, s.k_plus, s.t_last
-        for k in range(md):
-            tk = s.step - md + 1 + k
-            w, c, k_plus, t_last, s = send(p, s, w, c, k_plus, t_last, s.pre_hist[k], tk, newest, dt)
-        return w, s._replace(c=c, k_plus=k_plus, t_last=t_last)
+        steps = newest - md + 1 + jnp.arange(md, dtype=jnp.int32)
+        has = s.pre_hist > 0  # (md, n_pre)
+        rows = jnp.any(has, axis=0)
+        first = jnp.min(jnp.where(has, steps[:, None], newest + 1), axis=0)
+        last = jnp.max(jnp.where(has, steps[:, None], newest - md), axis=0)
+        m_first = jnp.sum(jnp.where(steps[:, None] == first[None, :], s.pre_hist, 0.0), axis=0)
+        # Delivered after the trigger at t_last > first: integrate back to the first spike, depress there.
+        back = rows & (first <= s.t_last)
+        span_b = (first - s.t_last).astype(s.c.dtype) * dt
+        n0 = _n_at(s, s.t_last, newest, dt, p)
+        wb = jnp.clip(w + _weight_piece(s.c, n0, span_b[:, None], p, jnp), p.Wmin, p.Wmax)
+        w = jnp.where(back[:, None], wb, w)
+        c = jnp.where(back[:, None], s.c * jnp.exp(-span_b[:, None] / p.tau_c), s.c)
+        k_first = hist_at(s.kminus_hist, newest, first - delay_steps - 1) * jnp.exp(-dt / p.tau_minus)
+        c = c - p.A_minus * jnp.where(back, m_first, 0.0)[:, None] * k_first
+        k_plus = jnp.where(back, s.k_plus * jnp.exp(-span_b / p.tau_plus) + m_first, s.k_plus)
+        t_ref = jnp.where(back, first, s.t_last)
+        pre_win = jnp.concatenate([jnp.zeros((span - md, n_pre), s.c.dtype), s.pre_hist])
+        w, c, k_plus, access = sweep(p, s, w, c, k_plus, t_ref, rows, jnp.where(rows, last, t_ref), pre_win, newest, dt)
+        return w, s._replace(c=c, k_plus=k_plus, t_last=jnp.where(rows, last, s.t_last), access=access)
 
     def trigger(p, s, w, dt):
         """The volume transmitter's trigger at the end of a slice: every row brought to now."""
         now = s.step
         rows = jnp.ones((n_pre,), bool)
-        w, c, access = lazy_forward(p, s, w, s.c, rows, now, now, dt)
+        t1 = jnp.full_like(s.t_last, now)
+        none = jnp.zeros((span, n_pre), s.c.dtype)
+        w, c, k_plus, access = sweep(p, s, w, s.c, s.k_plus, s.t_last, rows, t1, none, now, dt)
         n = _n_at(s, now[None], now, dt, p)[0]
         dtk = (now - s.t_last).astype(c.dtype) * dt
         return w, s._replace(
             c=c,
             access=access,
             n=n.astype(c.dtype),
-            k_plus=s.k_plus * jnp.exp(-dtk / p.tau_plus),
+            k_plus=k_plus * jnp.exp(-dtk / p.tau_plus),
             t_last=jnp.full_like(s.t_last, now),
             t_trig=now,
         )
@@ -692,7 +693,7 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
     def prune(hist, access, t, newest):
         """ArchivingNode::set_spiketime at step ``t``: drops history entries, oldest first, while the oldest
         has been read by every incoming synapse and the entry after it is more than ``keep`` steps old."""
-        x = newest - jnp.arange(hlen)[::-1]
+        x = newest - jnp.arange(hlen, dtype=jnp.int32)[::-1]
         nonempty = hist > 0
         big = jnp.iinfo(jnp.int32).max
         later = jnp.where(nonempty, x[:, None], big)
@@ -738,7 +739,7 @@ def _n_at(s, t, newest, dt, p):
     last trigger, decayed (or extrapolated back), plus the dopamine spikes since that trigger up to ``t``.
     ``dopa_hist`` ends at step ``newest``."""
     hlen = s.dopa_hist.shape[0]
-    x = newest - jnp.arange(hlen)[::-1]  # the steps of dopa_hist
+    x = newest - jnp.arange(hlen, dtype=jnp.int32)[::-1]  # the steps of dopa_hist
     lag = (t[:, None] - x[None, :]).astype(s.c.dtype)
     take = (x[None, :] > s.t_trig) & (lag >= 0)
     extra = jnp.sum(jnp.where(take, s.dopa_hist[None, :] * jnp.exp(-jnp.where(take, lag, 0.0) * dt / p.tau_n), 0.0), 1)
