@@ -623,25 +623,40 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         arrivals = hist_at(s.post_hist, newest, g - delay_steps)  # (span, n_post)
         # K_minus of the post spikes emitted strictly before g - d (ArchivingNode::get_K_value)
         k_minus = hist_at(s.kminus_hist, newest, g - delay_steps - 1) * jnp.exp(-dt / p.tau_minus)
-        decay_c = jnp.exp(-dt / p.tau_c)
-
-        def body(carry, x):
-            w, c, k_plus, t_ref = carry
-            gi, n0, arr, dflag, km, m = x
-            active = rows & (t_ref < gi) & (gi <= t1)  # (n_pre,)
-            a = active[:, None]
-            w = jnp.where(a, w + _weight_piece(c, n0[None, :], dt, p, jnp), w)
-            kp = k_plus * jnp.exp(-(gi - t_ref).astype(c.dtype) * dt / p.tau_plus)
-            c = jnp.where(a, c * decay_c + p.A_plus * kp[:, None] * arr[None, :], c)
-            spike = active & (m > 0)
-            clip = a & ((arr[None, :] > 0) | (dflag > 0) | spike[:, None] | (gi == t1)[:, None])
-            w = jnp.where(clip, jnp.clip(w, p.Wmin, p.Wmax), w)
-            c = c - p.A_minus * jnp.where(spike, m, 0.0)[:, None] * km[None, :]
-            k_plus = jnp.where(spike, kp + m, k_plus)
-            t_ref = jnp.where(spike, gi, t_ref)
-            return (w, c, k_plus, t_ref), None
-
-        (w, c, k_plus, _), _ = jax.lax.scan(body, (w, c, k_plus, t_ref), (g, n_prev, arrivals, dopa, k_minus, pre_win))
+        dtype = c.dtype
+        active = rows[None, :] & (t_ref[None, :] < g[:, None]) & (g[:, None] <= t1[None, :])  # (span, n_pre)
+        m = jnp.where(active, pre_win, 0.0)
+        lag = (g[:, None] - g[None, :]).astype(dtype) * dt  # (span, span), ms
+        strict = lag > 0
+        # K_plus just before each step's spikes, and at t1.
+        since = (g[:, None] - t_ref[None, :]).astype(dtype) * dt
+        dp = jnp.where(strict, jnp.exp(-jnp.where(strict, lag, 0.0) / p.tau_plus), 0.0)
+        kp = k_plus[None, :] * jnp.exp(-since / p.tau_plus) + dp @ m
+        # Jumps of c at each step: facilitation by arrivals, depression by pre spikes.
+        jump = (
+            p.A_plus * jnp.where(active, kp, 0.0)[:, :, None] * arrivals[:, None, :]
+            - p.A_minus * m[:, :, None] * (k_minus[:, None, :])
+        )
+        # c at the start of each step's piece, (span, n_pre, n_post).
+        dc = jnp.where(strict, jnp.exp(-jnp.where(strict, lag - dt, 0.0) / p.tau_c), 0.0)
+        c_start = c[None] * jnp.exp(-(since - dt) / p.tau_c)[:, :, None] + jnp.einsum("gh,hij->gij", dc, jump)
+        piece = jnp.where(active[:, :, None], _weight_piece(c_start, n_prev[:, None, :], dt, p, jnp), 0.0)
+        spike = active & (m > 0)
+        clip = active[:, :, None] & (
+            (arrivals[:, None, :] > 0)
+            | (dopa[:, None, None] > 0)
+            | spike[:, :, None]
+            | (g[:, None] == t1[None, :])[:, :, None]
+        )
+        w = _clamp_chain(w, piece, clip, p.Wmin, p.Wmax)
+        # c and K_plus at t1.
+        to_end = (t1[None, :] - g[:, None]).astype(dtype) * dt  # (span, n_pre)
+        upto = to_end >= 0
+        decay_end = jnp.where(upto, jnp.exp(-jnp.where(upto, to_end, 0.0) / p.tau_c), 0.0)
+        span_row = (t1 - t_ref).astype(dtype) * dt
+        c = c * jnp.exp(-span_row / p.tau_c)[:, None] + jnp.einsum("gi,gij->ij", decay_end, jump)
+        kdecay = jnp.where(upto, jnp.exp(-jnp.where(upto, to_end, 0.0) / p.tau_plus), 0.0)
+        k_plus = k_plus * jnp.exp(-span_row / p.tau_plus) + jnp.sum(kdecay * m, axis=0)
         # get_history marks the entries it read, emitted in (t_ref - d, t1 - d].
         x = newest - jnp.arange(hlen, dtype=jnp.int32)[::-1]
         read = rows[None, :] & (t_ref[None, :] - delay_steps < x[:, None]) & (x[:, None] <= t1[None, :] - delay_steps)
@@ -680,12 +695,11 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         none = jnp.zeros((span, n_pre), s.c.dtype)
         w, c, k_plus, access = sweep(p, s, w, s.c, s.k_plus, s.t_last, rows, t1, none, now, dt)
         n = _n_at(s, now[None], now, dt, p)[0]
-        dtk = (now - s.t_last).astype(c.dtype) * dt
         return w, s._replace(
             c=c,
             access=access,
             n=n.astype(c.dtype),
-            k_plus=k_plus * jnp.exp(-dtk / p.tau_plus),
+            k_plus=k_plus,
             t_last=jnp.full_like(s.t_last, now),
             t_trig=now,
         )
@@ -732,6 +746,28 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         return (w - weights).astype(weights.dtype), s
 
     return PlasticityRule(init, update)
+
+
+def _clamp_chain(w, delta, clip, lo, hi):
+    """``w`` after the steps ``w = clip(w + delta_k, lo, hi)`` where ``clip[k]``, else ``w + delta_k``, in order.
+
+    Each step is ``x -> min(max(x + a, l), u)`` (``l, u = -inf, inf`` without clipping); such
+    maps compose into one of the same form, so the chain reduces as a balanced tree.
+    """
+    inf = jnp.asarray(jnp.inf, w.dtype)
+    a = delta
+    lo_k = jnp.where(clip, lo, -inf)
+    hi_k = jnp.where(clip, hi, inf)
+    size = 1 << max(0, (a.shape[0] - 1).bit_length())
+    pad = [(0, size - a.shape[0])] + [(0, 0)] * (a.ndim - 1)
+    a = jnp.pad(a, pad)
+    lo_k = jnp.pad(lo_k, pad, constant_values=-jnp.inf)
+    hi_k = jnp.pad(hi_k, pad, constant_values=jnp.inf)
+    while a.shape[0] > 1:
+        a1, a2 = a[0::2], a[1::2]
+        l1, l2, u1, u2 = lo_k[0::2], lo_k[1::2], hi_k[0::2], hi_k[1::2]
+        a, lo_k, hi_k = a1 + a2, jnp.clip(l1 + a2, l2, u2), jnp.clip(u1 + a2, l2, u2)
+    return jnp.clip(w + a[0], lo_k[0], hi_k[0])
 
 
 def _n_at(s, t, newest, dt, p):
