@@ -663,8 +663,8 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         access = s.access + jnp.sum(read, axis=1, dtype=c.dtype)[:, None] * (s.post_hist > 0)
         return w, c, k_plus, access
 
-    def deliver(p, s, w, dt):
-        """At the start of a slice: NEST's ``send`` for the pre spikes of the previous slice, in time order."""
+    def deliver_prep(p, s, w, dt):
+        """The backward part of delivery and the arguments of its `sweep`."""
         newest = s.step
         steps = newest - md + 1 + jnp.arange(md, dtype=jnp.int32)
         has = s.pre_hist > 0  # (md, n_pre)
@@ -684,18 +684,31 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         k_plus = jnp.where(back, s.k_plus * jnp.exp(-span_b / p.tau_plus) + m_first, s.k_plus)
         t_ref = jnp.where(back, first, s.t_last)
         pre_win = jnp.concatenate([jnp.zeros((span - md, n_pre), s.c.dtype), s.pre_hist])
-        w, c, k_plus, access = sweep(p, s, w, c, k_plus, t_ref, rows, jnp.where(rows, last, t_ref), pre_win, newest, dt)
-        return w, s._replace(c=c, k_plus=k_plus, t_last=jnp.where(rows, last, s.t_last), access=access)
+        return (w, c, k_plus, t_ref, rows, jnp.where(rows, last, t_ref), pre_win), last
+
+    def deliver(p, s, w, dt):
+        """At the start of a slice: NEST's ``send`` for the pre spikes of the previous slice, in time order."""
+        args, last = deliver_prep(p, s, w, dt)
+        w, c, k_plus, access = sweep(p, s, *args, s.step, dt)
+        return w, deliver_done(s, c, k_plus, access, args[4], last)
+
+    def deliver_done(s, c, k_plus, access, rows, last):
+        return s._replace(c=c, k_plus=k_plus, t_last=jnp.where(rows, last, s.t_last), access=access)
+
+    def trigger_prep(s, w):
+        rows = jnp.ones((n_pre,), bool)
+        t1 = jnp.full_like(s.t_last, s.step)
+        return (w, s.c, s.k_plus, s.t_last, rows, t1, jnp.zeros((span, n_pre), s.c.dtype))
 
     def trigger(p, s, w, dt):
         """The volume transmitter's trigger at the end of a slice: every row brought to now."""
+        w, c, k_plus, access = sweep(p, s, *trigger_prep(s, w), s.step, dt)
+        return w, trigger_done(p, s, c, k_plus, access, dt)
+
+    def trigger_done(p, s, c, k_plus, access, dt):
         now = s.step
-        rows = jnp.ones((n_pre,), bool)
-        t1 = jnp.full_like(s.t_last, now)
-        none = jnp.zeros((span, n_pre), s.c.dtype)
-        w, c, k_plus, access = sweep(p, s, w, s.c, s.k_plus, s.t_last, rows, t1, none, now, dt)
         n = _n_at(s, now[None], now, dt, p)[0]
-        return w, s._replace(
+        return s._replace(
             c=c,
             access=access,
             n=n.astype(c.dtype),
@@ -721,28 +734,50 @@ def _nest_schedule_rule(n_pre, n_post, delay_steps, md, di, max_delay, n_incomin
         reach = jnp.concatenate([jnp.ones((1, hist.shape[1]), jnp.int32), free[:-1]]) > 0
         return jnp.where(reach & pop_all, 0.0, jnp.where(reach & pop_but_one, jnp.minimum(hist, 1.0), hist))
 
+    def append(s, pre, post, dopamine, p, dt):
+        """The step's spikes: post spikes into the history (NEST prunes it first), dopamine into the
+        volume transmitter, pre spikes into the slice buffer."""
+        step = s.step + 1
+        k_minus = s.k_minus * jnp.exp(-dt / p.tau_minus) + post
+        hist = jnp.where(post[None, :] > 0, prune(s.post_hist, s.access, step, s.step), s.post_hist)
+        return s._replace(
+            step=step,
+            k_minus=k_minus,
+            post_hist=jnp.concatenate([hist[1:], post[None]]),
+            access=jnp.concatenate([s.access[1:], jnp.zeros_like(post)[None]]),
+            kminus_hist=jnp.concatenate([s.kminus_hist[1:], k_minus[None]]),
+            dopa_hist=jnp.concatenate([s.dopa_hist[1:], jnp.asarray(dopamine, post.dtype)[None]]),
+            pre_hist=jnp.concatenate([s.pre_hist[1:], pre[None]]),
+        )
+
     def update(params, state, weights, pre, post, dopamine, dt):
         s = state
         dtype = s.c.dtype
         pre = jnp.asarray(pre, dtype)
         post = jnp.asarray(post, dtype)
         w = weights.astype(dtype)
-        # Start of step s.step + 1: deliver the previous slice's pre spikes when a slice begins.
+        # Start of step s.step + 1: deliver the previous slice's pre spikes when a slice begins; end of
+        # the step: the trigger, every deliver_interval slices.
         starts = (s.step % md == 0) & (s.step > 0)
-        w, s = jax.lax.cond(starts, lambda a: deliver(params, a[1], a[0], dt), lambda a: a, (w, s))
-        step = s.step + 1
-        k_minus = s.k_minus * jnp.exp(-dt / params.tau_minus) + post
-        hist = jnp.where(post[None, :] > 0, prune(s.post_hist, s.access, step, s.step), s.post_hist)
-        s = s._replace(
-            step=step,
-            k_minus=k_minus,
-            post_hist=jnp.concatenate([hist[1:], post[None]]),
-            access=jnp.concatenate([s.access[1:], jnp.zeros_like(post)[None]]),
-            kminus_hist=jnp.concatenate([s.kminus_hist[1:], k_minus[None]]),
-            dopa_hist=jnp.concatenate([s.dopa_hist[1:], jnp.asarray(dopamine, dtype)[None]]),
-            pre_hist=jnp.concatenate([s.pre_hist[1:], pre[None]]),
-        )
-        w, s = jax.lax.cond(step % (di * md) == 0, lambda a: trigger(params, a[1], a[0], dt), lambda a: a, (w, s))
+        if md == 1:  # both in one step
+            w, s = jax.lax.cond(starts, lambda a: deliver(params, a[1], a[0], dt), lambda a: a, (w, s))
+            s = append(s, pre, post, dopamine, params, dt)
+            trig = s.step % (di * md) == 0
+            w, s = jax.lax.cond(trig, lambda a: trigger(params, a[1], a[0], dt), lambda a: a, (w, s))
+            return (w - weights).astype(weights.dtype), s
+        # At most one of the two per step: one sweep, its arguments chosen (cheaper than a cond under vmap).
+        s_trig = append(s, pre, post, dopamine, params, dt)
+        trig = s_trig.step % (di * md) == 0
+        d_args, last = deliver_prep(params, s, w, dt)
+        pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(starts, x, y), a, b)  # noqa: E731
+        args = pick(d_args, trigger_prep(s_trig, w))
+        at = pick(s, s_trig)
+        rows = args[4] & (starts | trig)
+        w_new, c, k_plus, access = sweep(params, at, *args[:4], rows, *args[5:], at.step, dt)
+        delivered = append(deliver_done(s, c, k_plus, access, rows, last), pre, post, dopamine, params, dt)
+        triggered = trigger_done(params, s_trig, c, k_plus, access, dt)
+        s = pick(delivered, jax.tree.map(lambda x, y: jnp.where(trig, x, y), triggered, s_trig))
+        w = jnp.where(starts | trig, w_new, w)
         return (w - weights).astype(weights.dtype), s
 
     return PlasticityRule(init, update)
