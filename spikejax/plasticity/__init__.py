@@ -6,6 +6,7 @@
 
 from spikejax.plasticity.base import PlasticityRule
 from spikejax.plasticity.hebbian import RewardHebbianParams, RewardHebbianState, reward_modulated_hebbian, row_increment
+from spikejax.plasticity.rstdp import RSTDPNestState, RSTDPParams, RSTDPState, replay, rstdp, rstdp_params, set_dopamine
 from spikejax.plasticity.supervised import StochasticSupervisedParams, stochastic_supervised
 
 __all__ = [
@@ -14,6 +15,13 @@ __all__ = [
     "RewardHebbianState",
     "reward_modulated_hebbian",
     "row_increment",
+    "RSTDPParams",
+    "RSTDPState",
+    "RSTDPNestState",
+    "rstdp",
+    "rstdp_params",
+    "set_dopamine",
+    "replay",
     "StochasticSupervisedParams",
     "stochastic_supervised",
 ]
