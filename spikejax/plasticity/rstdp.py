@@ -37,8 +37,10 @@ lazily, at its update points, and the order of those points changes the result:
 3. Clipping only at the ends of NEST's pieces (dopamine spikes, post arrivals, update
    points), not in between.
 
-With dense spikes (hundreds of Hz, as the snake's inputs) these are not small: the
-eligibility can grow several-fold over the exact-time model. So this module gives:
+These are not small. With one synapse, pre and post at 100 Hz each (random, 1 s,
+``tau_c`` 300 ms, ``tau_n`` 40 ms, NEST defaults otherwise) NEST ends with ``c`` about
+16 % less negative than the exact-time model; at 500 Hz its largest ``c`` is three
+times the model's. So this module gives:
 
 * `rstdp` with ``schedule="nest"`` (default): a time-driven rule, one update per
   neural step for a dense group, that performs NEST's update points at NEST's steps
@@ -47,9 +49,9 @@ eligibility can grow several-fold over the exact-time model. So this module give
 * `rstdp` with ``schedule="exact"``: the model itself, every spike at its own time,
   closed form per step, clipping every step; equal to NEST when every pre spike falls
   on a slice end (a multiple of the min delay), up to point 3;
-* `replay`: NEST's schedule for one synapse as an event loop in float64, written from
-  NEST's source independently of the time-driven code (but with the same maths,
-  `_advance`), to check both against NEST.
+* `replay`: NEST's schedule for one synapse as an event loop in float64, following
+  NEST's algorithm step by step, separately from the time-driven code (but with the
+  same maths, `_advance`), to check both against NEST.
 """
 
 from __future__ import annotations
@@ -226,8 +228,10 @@ def rstdp(
     ``state.c`` are then NEST's stored weight and ``c`` (``GetStatus``) after
     ``Simulate`` up to ``t``, and ``state.n`` is ``n`` at the last trigger. The weight
     NEST transmits a pre spike with is the one after that spike's delivery, one slice
-    later. Steps at slice starts do ``min_delay_steps`` short scans; under ``vmap``
-    every step pays for them.
+    later. Every step evaluates one lazy update over ``(deliver_interval + 1) *
+    min_delay_steps`` steps, vectorized; only slice starts and ends need it, but under
+    ``vmap`` (the step counter being batched) every step pays for it, many times the
+    cost of ``"exact"``.
 
     `set_dopamine` acts like ``SetStatus({"n": r})`` between two ``Simulate`` calls: on
     the NEST schedule ``n`` is set as of the last trigger (NEST's ``n`` is referenced
