@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from spikejax.errors import UserError
-from spikejax.plasticity import RSTDPParams, replay, rstdp, rstdp_params, set_dopamine
+from spikejax.plasticity import RSTDPNestState, RSTDPParams, replay, rstdp, rstdp_params, set_dopamine
 
 H = 0.1  # ms, NEST's default resolution
 D = 1.0  # ms, every delay of the NEST networks below
@@ -147,6 +147,35 @@ def test_dw_keeps_weights_in_bounds_and_every_parameter_is_traced(schedule):
     dws, _ = f(batch)
     assert dws.shape == (4, 3, 2)
     assert isinstance(batch, RSTDPParams)
+
+
+def test_nest_schedule_with_an_unbatched_step_counter_matches_batched():
+    rule = rstdp(3, 2, schedule="nest", deliver_interval=2)
+    p = rstdp_params(tau_n=30.0)
+    batch = 4
+    w = jnp.full((batch, 3, 2), 10.0)
+    key = jax.random.key(0)
+    pre = (jax.random.uniform(key, (60, batch, 3)) < 0.2).astype(jnp.float32)
+    post = (jax.random.uniform(jax.random.fold_in(key, 1), (60, batch, 2)) < 0.2).astype(jnp.float32)
+    dopa = jnp.zeros((60, batch)).at[25].set(2.0)
+    axes = RSTDPNestState(*[0] * len(RSTDPNestState._fields))._replace(step=None, t_trig=None)
+    s0 = jax.vmap(rule.init)(w)
+    runs = {}
+    for name, in_axes, state in (
+        ("batched", 0, s0),
+        ("shared", axes, s0._replace(step=s0.step[0], t_trig=s0.t_trig[0])),
+    ):
+        step = jax.vmap(rule.update, in_axes=(None, in_axes, 0, 0, 0, 0, None), out_axes=(0, in_axes))
+
+        def body(carry, x, step=step):
+            w, s = carry
+            dw, s = step(p, s, w, *x, 0.1)
+            return (w + dw, s), s.c
+
+        (_, _), cs = jax.lax.scan(body, (w, state), (pre, post, dopa))
+        runs[name] = np.asarray(cs)
+    np.testing.assert_allclose(runs["shared"], runs["batched"], rtol=1e-6, atol=1e-6)
+    assert np.any(runs["shared"] != 0.0)
 
 
 def test_bad_input():
