@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from spikejax.errors import UserError
-from spikejax.plasticity import RSTDPParams, replay, rstdp, rstdp_params, set_dopamine
+from spikejax.plasticity import RSTDPNestState, RSTDPParams, replay, rstdp, rstdp_params, set_dopamine
 
 H = 0.1  # ms, NEST's default resolution
 D = 1.0  # ms, every delay of the NEST networks below
@@ -147,6 +147,35 @@ def test_dw_keeps_weights_in_bounds_and_every_parameter_is_traced(schedule):
     dws, _ = f(batch)
     assert dws.shape == (4, 3, 2)
     assert isinstance(batch, RSTDPParams)
+
+
+def test_nest_schedule_with_an_unbatched_step_counter_matches_batched():
+    rule = rstdp(3, 2, schedule="nest", deliver_interval=2)
+    p = rstdp_params(tau_n=30.0)
+    batch = 4
+    w = jnp.full((batch, 3, 2), 10.0)
+    key = jax.random.key(0)
+    pre = (jax.random.uniform(key, (60, batch, 3)) < 0.2).astype(jnp.float32)
+    post = (jax.random.uniform(jax.random.fold_in(key, 1), (60, batch, 2)) < 0.2).astype(jnp.float32)
+    dopa = jnp.zeros((60, batch)).at[25].set(2.0)
+    axes = RSTDPNestState(*[0] * len(RSTDPNestState._fields))._replace(step=None, t_trig=None)
+    s0 = jax.vmap(rule.init)(w)
+    runs = {}
+    for name, in_axes, state in (
+        ("batched", 0, s0),
+        ("shared", axes, s0._replace(step=s0.step[0], t_trig=s0.t_trig[0])),
+    ):
+        step = jax.vmap(rule.update, in_axes=(None, in_axes, 0, 0, 0, 0, None), out_axes=(0, in_axes))
+
+        def body(carry, x, step=step):
+            w, s = carry
+            dw, s = step(p, s, w, *x, 0.1)
+            return (w + dw, s), s.c
+
+        (_, _), cs = jax.lax.scan(body, (w, state), (pre, post, dopa))
+        runs[name] = np.asarray(cs)
+    np.testing.assert_allclose(runs["shared"], runs["batched"], rtol=1e-6, atol=1e-6)
+    assert np.any(runs["shared"] != 0.0)
 
 
 def test_bad_input():
@@ -297,7 +326,7 @@ def test_replay_dense_spikes_deliver_interval_and_multiplicity():
     check_replay({"tau_c": 300.0, "tau_n": 40.0}, sorted(pre), sorted(post), dopa, t_sim=90.0, deliver_interval=3)
 
 
-def test_time_driven_rule_equals_nest_with_n_set_each_control_step(x64):
+def test_exact_schedule_equals_nest_for_pre_spikes_on_slice_ends_with_n_set(x64):
     # The authors' mode: SetStatus({"n": r}) on the connection every 20 ms, 60 control steps.
     # Pre spikes on whole milliseconds, where NEST's schedule is exact (see the module docstring);
     # post spikes anywhere.
@@ -338,7 +367,7 @@ def test_time_driven_rule_equals_nest_with_n_set_each_control_step(x64):
         compare(got[steps - 1], want, what)
 
 
-def test_time_driven_rule_equals_nest_with_dopamine_spikes(x64):
+def test_exact_schedule_equals_nest_for_pre_spikes_on_slice_ends_with_dopamine(x64):
     # Dopamine through the volume transmitter (arriving one delay after the dopamine parrot), b > 0,
     # two postsynaptic neurons sharing the rule's n: compared after every whole millisecond.
     rng = np.random.default_rng(11)
@@ -372,8 +401,8 @@ def dense(rng, t_sim, n, lo=1.1):
 
 
 def test_nest_schedule_equals_nest_with_n_set_each_control_step(x64):
-    # The authors' mode, spikes anywhere and dense: SetStatus({"n": r}) every 20 ms for 60 control steps,
-    # NEST read after every millisecond and at every control step, the rule after every step.
+    # The authors' mode, dense spikes anywhere (repeats are multiplicities): SetStatus({"n": r}) every
+    # 20 ms for 60 control steps; NEST read every millisecond (at x.5 ms), the rule after every step.
     rng = np.random.default_rng(5)
     n_ctrl, per = 60, 200
     t_sim = n_ctrl * per * H
@@ -447,8 +476,8 @@ def nest_group(params, pres, posts, dopa, *, w0, t_sim, record, deliver_interval
 
 @pytest.mark.parametrize("n_pre, n_post, deliver_interval", [(4, 2, 1), (4, 2, 2), (1, 1, 2)])
 def test_nest_schedule_group_equals_nest_with_dopamine_spikes(x64, n_pre, n_post, deliver_interval):
-    # A group, dopamine through the volume transmitter, b > 0, clipping, dense spikes anywhere. The 1 x 1
-    # case needs NEST's pruning of the post history (a pruned entry is not read twice).
+    # A group, dopamine through the volume transmitter, b > 0, clipping, dense spikes anywhere, NEST's
+    # GetStatus of every connection every 0.5 ms.
     rng = np.random.default_rng(13)
     t_sim = 150.0
     pres = [dense(rng, t_sim, 40) for _ in range(n_pre)]
