@@ -1,0 +1,431 @@
+"""``spikejax reproduce snake-rstdp`` and ``spikejax evaluate snake-rstdp``: Sec. III-IV of the snake R-STDP paper, many seeds.
+
+``reproduce`` trains every topology (`robots.snake.rstdp.TOPOLOGIES`) for
+``--train-laps`` passes of the 8 (`robots.snake.training.train`, all seeds in
+one vmapped program, checkpointed so a killed run resumes), tests the frozen
+networks on one pass of each test track (ladder, zigzag and their mirror
+images) and writes, in ``--out``:
+
+* ``snake_rstdp.csv``: per topology, track and metric window, the seeds'
+  mean of every metric of `robots.snake.metrics` with a 95 % interval over
+  seeds (Student t; Wilson for the share of seeds that ever failed), beside the
+  paper's claim (separated < 2 degrees, basic < 4 degrees, unified resets
+  every ~50 s);
+* ``weights/TOPOLOGY.npz``: the trained weights of every seed;
+* ``training/TOPOLOGY.npz``: the training records, and the figures
+  ``snake_rstdp_training.png`` (head and body angle, distance, failures over
+  training: Figs. 7-9), ``snake_rstdp_weights.png`` (weights over training:
+  Figs. 6, 8a), ``snake_rstdp_test.png`` (angle and decoded directions on each
+  test track: Fig. 10) and ``snake_rstdp_trajectories.png``.
+
+``evaluate`` tests saved weights on any track, a name or a CSV of waypoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from robots.snake import metrics, rstdp, tracks, training
+from robots.snake.gait import gait_params, gait_period
+from spikejax.benchmarking import write_csv
+from spikejax.commands import Command, add_common, count, output_directory
+from spikejax.errors import UserError
+from spikejax.stats import mean_interval, wilson_interval
+
+__all__ = ["reproduce_command", "evaluate_command", "TEST_TRACKS", "HEADER"]
+
+TEST_TRACKS = ("ladder", "ladder-mirror", "zigzag", "zigzag-mirror")
+PAPER = {
+    "basic": "mean head angle rarely beyond 4 deg, no failure",
+    "basic-head": "unstable in training (not tested)",
+    "unified": "never completes a test episode, reset every ~50 s",
+    "separated": "mean head angle below 2 deg",
+}
+HEADER = [
+    "topology",
+    "track",
+    "window_steps",
+    "seeds",
+    "mean_head_angle_deg",
+    "ci_low",
+    "ci_high",
+    "p95_head_angle_deg",
+    "instant_head_angle_deg",
+    "failures_per_min",
+    "failures_per_min_ci_low",
+    "failures_per_min_ci_high",
+    "seeds_failed",
+    "seeds_failed_ci_low",
+    "seeds_failed_ci_high",
+    "completed",
+    "steering_changes_per_100s",
+    "time_at_limit",
+    "paper",
+]
+
+
+def _config(topology: str, **kw) -> rstdp.NetworkConfig:
+    return rstdp.NetworkConfig(topology=topology, **kw)
+
+
+def _windows(env) -> tuple[int, ...]:
+    period = int(round(float(gait_period(gait_params())) / env.dt))
+    return (period, metrics.PAPER_WINDOW)
+
+
+def save_weights(path: Path, topology: str, seeds, loop) -> None:
+    """The trained weights of every seed, atomically."""
+    tmp = path.with_suffix(".tmp.npz")
+    net = jax.device_get(loop.controller)
+    np.savez(tmp, topology=topology, seeds=np.asarray(seeds), w_first=net.w_first, w_hidden=net.w_hidden)
+    tmp.replace(path)
+
+
+def load_weights(path: Path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """``(topology, seeds, w_first, w_hidden)`` of a weights file; a one-line error if it is not one."""
+    try:
+        with np.load(path) as z:
+            topology = str(z["topology"])
+            out = topology, z["seeds"], z["w_first"], z["w_hidden"]
+    except (OSError, KeyError, ValueError) as e:
+        raise UserError(f"{path}: not a snake-rstdp weights file ({e.__class__.__name__})") from None
+    if topology not in rstdp.TOPOLOGIES:
+        raise UserError(f"{path}: unknown topology {topology!r}")
+    return out
+
+
+def networks_with(config, params, seeds, w_first, w_hidden):
+    """Fresh networks (neurons at rest, as after loading) with the given weights, one per seed."""
+
+    def one(seed, w1, w2):
+        k_net, _ = jax.random.split(jax.random.PRNGKey(seed))
+        net = rstdp.network_init(config, params, key=k_net)
+        return net._replace(w_first=w1, w_hidden=w2)
+
+    return jax.vmap(one)(jnp.asarray(seeds, jnp.uint32), jnp.asarray(w_first), jnp.asarray(w_hidden))
+
+
+def test_rows(topology: str, track_name: str, trace: training.TestTrace, dt: float, windows) -> list[list]:
+    """Rows of ``snake_rstdp.csv`` for one topology on one track."""
+    rows = []
+    n = trace.a_head.shape[0]
+    for window in windows:
+        per_seed = [
+            metrics.seed_metrics(
+                trace.a_head[i], trace.d_body[i], trace.failed[i], trace.completed[i], dt=dt, window=window
+            )
+            for i in range(n)
+        ]
+        col = lambda k: np.array([m[k] for m in per_seed], float)  # noqa: E731
+        mean, lo, hi = mean_interval(col("mean_head_angle_deg"))
+        fpm, flo, fhi = mean_interval(col("failures_per_min"))
+        failed = int(np.sum(col("failures_per_min") > 0))
+        wlo, whi = wilson_interval(failed, n)
+        rows.append(
+            [
+                topology,
+                track_name,
+                window,
+                n,
+                round(mean, 3),
+                round(lo, 3),
+                round(hi, 3),
+                round(float(np.median(col("p95_head_angle_deg"))), 3),
+                round(float(col("instant_head_angle_deg").mean()), 3),
+                round(fpm, 3),
+                round(flo, 3),
+                round(fhi, 3),
+                round(failed / n, 3),
+                round(float(wlo), 3),
+                round(float(whi), 3),
+                round(float(col("completed").mean()), 3),
+                round(float(col("steering_changes_per_100s").mean()), 3),
+                round(float(col("time_at_limit").mean()), 3),
+                PAPER[topology],
+            ]
+        )
+    return rows
+
+
+def _progress_bar(desc: str, total: int, enabled: bool):
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="step", disable=not enabled)
+
+    def update(done, total):
+        bar.n = done
+        bar.refresh()
+        if done >= total:
+            bar.close()
+
+    return update
+
+
+def run(
+    out: Path,
+    *,
+    seeds: int,
+    train_laps: float,
+    topologies,
+    test_steps: int | None = None,
+    chunk_steps: int | None = None,
+    progress: bool = True,
+) -> list[list]:
+    """Train, test, write everything in the module docstring; returns the table's rows."""
+    (out / "weights").mkdir(parents=True, exist_ok=True)
+    (out / "training").mkdir(exist_ok=True)
+    (out / "checkpoints").mkdir(exist_ok=True)
+    (out / "tests").mkdir(exist_ok=True)
+    seed_list = np.arange(seeds)
+    env = training.env_for("eight")
+    steps = int(np.ceil(train_laps * training.lap_steps(env) / training.BLOCK) * training.BLOCK)
+    chunk = min(steps, chunk_steps or 20 * training.BLOCK)
+    steps = int(np.ceil(steps / chunk) * chunk)
+    rows, traces, train_records = [], {}, {}
+    for topology in topologies:
+        config, t0 = _config(topology), time.time()
+        params = rstdp.network_params(config)
+        weights = out / "weights" / f"{topology}.npz"
+        if not weights.exists():
+            result = training.train(
+                config,
+                params,
+                seed_list,
+                steps,
+                env=env,
+                chunk_steps=chunk,
+                directory=out / "checkpoints" / topology,
+                fingerprint=json.dumps([dataclasses.asdict(config), seeds, steps, chunk]),
+                progress=_progress_bar(f"train {topology}", steps, progress),
+            )
+            np.savez(out / "training" / f"{topology}.npz", **_flatten(jax.device_get(result.records)))
+            save_weights(weights, topology, seed_list, result.loop)
+        _, saved_seeds, w1, w2 = load_weights(weights)
+        with np.load(out / "training" / f"{topology}.npz") as z:
+            train_records[topology] = dict(z)
+        nets = networks_with(config, params, saved_seeds, w1, w2)
+        for name in TEST_TRACKS:
+            cache = out / "tests" / f"{topology}-{name}.npz"
+            if cache.exists():
+                with np.load(cache) as z:
+                    trace = training.TestTrace(**{k: z[k] for k in training.TestTrace._fields})
+            else:
+                trace = training.test(config, params, nets, name, test_steps, seeds=saved_seeds)
+                tmp = cache.with_suffix(".tmp.npz")
+                np.savez(tmp, **trace._asdict())
+                tmp.replace(cache)
+            traces[topology, name] = trace
+            rows += test_rows(topology, name, trace, env.dt, _windows(env))
+        if progress:
+            print(f"{topology}: {time.time() - t0:.0f} s")
+    write_csv(out / "snake_rstdp.csv", HEADER, rows)
+    _plot_training(out / "snake_rstdp_training.png", train_records, env.dt)
+    _plot_weights(out / "snake_rstdp_weights.png", train_records, env.dt)
+    _plot_tests(out / "snake_rstdp_test.png", traces, env.dt)
+    _plot_trajectories(out / "snake_rstdp_trajectories.png", traces)
+    return rows
+
+
+def _flatten(tree, prefix=""):
+    flat = {}
+    for k, v in tree.items():
+        if isinstance(v, dict):
+            flat.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            flat[prefix + k] = np.asarray(v)
+    return flat
+
+
+def _plot_training(path: Path, records, dt):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 2.6 * len(records)), layout="constrained")
+    for i, (topology, r) in enumerate(records.items()):
+        t = (np.arange(r["mean.abs_head"].shape[1]) + 1) * training.BLOCK * dt
+        ax = fig.add_subplot(len(records), 1, i + 1)
+        for key, color, label in (("mean.a_head", "tab:green", "head"), ("mean.a_body", "tab:blue", "body")):
+            deg = np.degrees(r[key])
+            ax.plot(t, np.median(deg, 0), color=color, lw=0.8, label=f"{label} angle (median over seeds)")
+            ax.fill_between(t, *np.percentile(deg, [10, 90], 0), color=color, alpha=0.2, lw=0)
+        ax.set_ylabel("deg")
+        twin = ax.twinx()
+        twin.plot(t, np.median(r["mean.distance"], 0), color="tab:red", lw=0.8, label="distance (m)")
+        fails = np.cumsum(r["failures"], 1).mean(0)
+        twin.plot(t, fails / max(1.0, fails[-1]) * twin.get_ylim()[1], "k:", lw=0.8, label="failures (scaled)")
+        ax.set_title(f"{topology}: training, {r['mean.abs_head'].shape[0]} seeds (10-90 % band)", fontsize=9)
+        ax.legend(loc="upper left", fontsize=7)
+        twin.legend(loc="upper right", fontsize=7)
+    fig.axes[-1].set_xlabel("training time (s)")
+    fig.savefig(path, dpi=110)
+
+
+def _plot_weights(path: Path, records, dt):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 2.6 * len(records)), layout="constrained")
+    for i, (topology, r) in enumerate(records.items()):
+        hidden = topology in ("unified", "separated")
+        w = r["snapshot.w_hidden"] if hidden else r["snapshot.w_first"]
+        t = (np.arange(w.shape[1]) + 1) * training.BLOCK * dt
+        ax = fig.add_subplot(len(records), 1, i + 1)
+        flat = w[0].reshape(w.shape[1], -1)
+        ax.plot(t, flat, lw=0.6)
+        ax.set_ylabel("weight (pA)")
+        which = "hidden -> body" if hidden else "input -> output"
+        ax.set_title(f"{topology}: {which} weights over training, seed 0", fontsize=9)
+    fig.axes[-1].set_xlabel("training time (s)")
+    fig.savefig(path, dpi=110)
+
+
+def _plot_tests(path: Path, traces, dt):
+    from matplotlib.figure import Figure
+
+    topologies = sorted({k[0] for k in traces}, key=rstdp.TOPOLOGIES.index)
+    fig = Figure(figsize=(14, 2.4 * len(topologies)), layout="constrained")
+    for i, topology in enumerate(topologies):
+        for j, name in enumerate(TEST_TRACKS):
+            tr = traces[topology, name]
+            t = (np.arange(tr.a_head.shape[1]) + 1) * dt
+            ax = fig.add_subplot(len(topologies), len(TEST_TRACKS), i * len(TEST_TRACKS) + j + 1)
+            ax.plot(t, np.degrees(tr.a_head[0]), lw=0.4, color="tab:gray", label="Angle.Head")
+            ax.plot(
+                t,
+                np.degrees(metrics.running_mean(tr.a_head[0], 125, tr.failed[0])),
+                color="k",
+                lw=0.8,
+                label="running mean",
+            )
+            ax.set_ylim(-45, 45)
+            twin = ax.twinx()
+            twin.plot(t, tr.d_body[0], color="tab:blue", lw=0.6, label="Direction.Body")
+            twin.plot(t, tr.d_head[0], color="tab:orange", lw=0.6, label="Direction.Head")
+            twin.set_ylim(-1.1, 1.1)
+            for f in np.nonzero(tr.failed[0])[0]:
+                ax.axvline((f + 1) * dt, color="r", lw=0.6)
+            ax.set_title(f"{topology}, {name}, seed 0", fontsize=8)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=6, loc="lower left")
+                twin.legend(fontsize=6, loc="lower right")
+    fig.savefig(path, dpi=110)
+
+
+def _plot_trajectories(path: Path, traces):
+    from matplotlib.figure import Figure
+
+    topologies = sorted({k[0] for k in traces}, key=rstdp.TOPOLOGIES.index)
+    fig = Figure(figsize=(14, 3.2 * len(topologies)), layout="constrained")
+    for i, topology in enumerate(topologies):
+        for j, name in enumerate(TEST_TRACKS):
+            tr = traces[topology, name]
+            ax = fig.add_subplot(len(topologies), len(TEST_TRACKS), i * len(TEST_TRACKS) + j + 1)
+            ax.plot(tr.target_xy[0, :, 0], tr.target_xy[0, :, 1], "g-", lw=2, label="target")
+            for s in range(min(8, tr.head_xy.shape[0])):
+                ax.plot(tr.head_xy[s, :, 0], tr.head_xy[s, :, 1], lw=0.5, label="head (8 seeds)" if s == 0 else None)
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.set_title(f"{topology}, {name}", fontsize=8)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=6)
+    fig.savefig(path, dpi=110)
+
+
+def _topologies(text: str) -> tuple[str, ...]:
+    names = tuple(t.strip() for t in text.split(",") if t.strip())
+    bad = [t for t in names if t not in rstdp.TOPOLOGIES]
+    if bad or not names:
+        raise UserError(
+            f"--topologies: unknown {', '.join(bad) or '(none)'}; choose from {', '.join(rstdp.TOPOLOGIES)}"
+        )
+    return names
+
+
+def _add_reproduce_arguments(parser) -> None:
+    add_common(parser)
+    parser.add_argument("--seeds", type=count, default=64, help="seeds per topology (default 64)")
+    parser.add_argument(
+        "--train-laps",
+        type=float,
+        default=2.0,
+        help="training length in passes of the 8 at the snake's speed (default 2)",
+    )
+    parser.add_argument("--topologies", default=",".join(rstdp.TOPOLOGIES), help="comma-separated, default all four")
+    parser.add_argument(
+        "--test-steps", type=count, default=None, help="control steps per test track (default: one pass)"
+    )
+
+
+def run_reproduce(*, out, seeds, train_laps, topologies, test_steps, no_progress) -> int:
+    """``spikejax reproduce snake-rstdp --out DIR``: `run`, and its table printed."""
+    if not train_laps > 0:
+        raise UserError(f"--train-laps must be positive, got {train_laps}")
+    names = _topologies(topologies)
+    with output_directory(out, command="reproduce snake-rstdp") as out:
+        rows = run(
+            out, seeds=seeds, train_laps=train_laps, topologies=names, test_steps=test_steps, progress=not no_progress
+        )
+        _print(rows)
+        print(f"wrote {out}/snake_rstdp.csv, weights/, training/, snake_rstdp_*.png")
+    return 0
+
+
+def _print(rows):
+    print("topology    track           window  mean |MA a_head| deg [95% CI]   failures/min  seeds failed")
+    for r in rows:
+        print(
+            f"{r[0]:<11} {r[1]:<15} {r[2]:>6}  {r[4]:7.2f} [{r[5]:.2f}, {r[6]:.2f}]        {r[9]:8.2f}      {r[12]:.2f}"
+        )
+
+
+def _add_evaluate_arguments(parser) -> None:
+    add_common(parser)
+    parser.add_argument(
+        "--weights", required=True, help="a reproduce output directory (its weights/) or a weights .npz"
+    )
+    parser.add_argument(
+        "--track", required=True, help=f"a track name ({', '.join(tracks.TRACKS)}) or a CSV of x, y waypoints"
+    )
+    parser.add_argument("--steps", type=count, default=None, help="control steps (default: one pass of the track)")
+
+
+def run_evaluate(*, out, weights, track, steps, no_progress) -> int:
+    """``spikejax evaluate snake-rstdp --weights DIR --track FILE --out DIR``: frozen networks on any track."""
+    path = Path(weights)
+    files = sorted((path / "weights").glob("*.npz")) if path.is_dir() else [path]
+    if not files or not all(f.is_file() for f in files):
+        raise UserError(f"--weights {weights}: no weights files found (expected DIR/weights/TOPOLOGY.npz or a .npz)")
+    if track in tracks.TRACKS:
+        the_track, name = track, track
+    else:
+        the_track, name = tracks.load_waypoints(track), Path(track).name
+    env = training.env_for(the_track)
+    with output_directory(out, command="evaluate snake-rstdp") as out:
+        rows = []
+        for f in files:
+            topology, seeds, w1, w2 = load_weights(f)
+            config = _config(topology)
+            params = rstdp.network_params(config)
+            nets = networks_with(config, params, seeds, w1, w2)
+            trace = training.test(config, params, nets, the_track, steps, seeds=seeds)
+            rows += test_rows(topology, name, trace, env.dt, _windows(env))
+        write_csv(out / "snake_rstdp.csv", HEADER, rows)
+        _print(rows)
+        print(f"wrote {out}/snake_rstdp.csv")
+    return 0
+
+
+reproduce_command = Command(
+    help="train the snake's four R-STDP networks over many seeds and test them (Sec. III-IV of the paper)",
+    add_arguments=_add_reproduce_arguments,
+    run=run_reproduce,
+)
+evaluate_command = Command(
+    help="test saved snake R-STDP networks on any track (a name or a CSV of waypoints)",
+    add_arguments=_add_evaluate_arguments,
+    run=run_evaluate,
+)

@@ -1,0 +1,200 @@
+"""Training and testing the snake's R-STDP networks, many seeds at once (Sec. III and IV of the snake R-STDP paper).
+
+Training (Sec. III): the target runs the drawn 8 (`robots.snake.tracks`,
+``drawn=True``); when it reaches the end the episode is complete and the next
+one runs mirrored (Fig. 5 caption); when the reset rule of Sec. III-B fires
+(`robots.snake.env.SnakeEnv`'s ``done``) the snake starts the same episode again.
+Either way only the robot restarts: the network keeps its weights and its
+state, and forgets only its direction integrators (NRP resets the robot, not
+the brain). Every seed is one member of a `jax.vmap` over
+`spikejax.rollout.rollout`; a long training runs in chunks checkpointed by
+`spikejax.rollout.run_chunked`, so a killed run resumes where it stopped.
+
+Testing (Sec. IV): the weights frozen (``learn=False``), one pass of each drawn
+test track (ladder, zigzag, their mirror images), a failure restarting the
+pass; every control step is recorded for the metrics (`robots.snake.metrics`).
+
+A seed fixes the initial weights and every Poisson spike; the snake, the
+tracks and the env are deterministic, so a seed's result does not depend on
+the batch it runs in.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from robots.snake import tracks
+from robots.snake.env import SNAKE_SPEED, SnakeEnv
+from robots.snake.rstdp import NetworkConfig, NetworkParams, controller, network_init
+from spikejax import rollout
+
+__all__ = ["BLOCK", "env_for", "lap_steps", "train", "test", "TrainResult", "TestTrace"]
+
+BLOCK = 50  # control steps (1 s) per training record
+
+
+def env_for(track="eight", **kwargs) -> SnakeEnv:
+    """The env of training and testing: drawn tracks, frames for the grid encoder, no event buffer."""
+    kwargs.setdefault("drawn", True)
+    kwargs.setdefault("compact_events", False)
+    return SnakeEnv(track, **kwargs)
+
+
+def lap_steps(env: SnakeEnv, slack: float = 1.25) -> int:
+    """Control steps for one pass of ``env``'s track at the snake's straight speed, times ``slack``, whole blocks."""
+    steps = float(env._track.length) / SNAKE_SPEED / env.dt * slack
+    return int(math.ceil(steps / BLOCK) * BLOCK)
+
+
+def _members(env: SnakeEnv, config: NetworkConfig, params: NetworkParams, seeds, mirror):
+    """The initial loop state of every seed: the env at rest, a fresh network, the seed's keys."""
+    initial = env.reset(jax.random.PRNGKey(0), mirror=False)
+
+    def one(seed, mirror):
+        key = jax.random.PRNGKey(seed)
+        k_net, k_loop = jax.random.split(key)
+        state = env.restart(initial, initial, mirror)
+        return rollout.loop_init(state, network_init(config, params, key=k_net), key=k_loop)
+
+    return initial, jax.vmap(one)(
+        jnp.asarray(seeds, jnp.uint32), jnp.broadcast_to(jnp.asarray(mirror, bool), (len(seeds),))
+    )
+
+
+def _summary(loop, out, env_state):
+    m = env_state.metrics
+    return {
+        "abs_head": jnp.abs(m["a_head"]),
+        "a_head": m["a_head"],
+        "a_body": m["a_body"],
+        "distance": m["distance"],
+        "d_body": out["d_body"],
+        "d_head": out["d_head"],
+    }
+
+
+def _snapshot(loop):
+    net = loop.controller
+    return {"w_first": net.w_first, "w_hidden": net.w_hidden, "r_first": net.r_first, "r_hidden": net.r_hidden}
+
+
+class TrainResult(NamedTuple):
+    """A training: the final loop state of every seed (weights in ``loop.controller``) and its records.
+
+    ``records["mean"]`` / ``["last"]``: per seed and block of `BLOCK` steps, the
+    mean and last of ``abs_head, a_head, a_body, distance, d_body, d_head``
+    (radians, metres); ``records["snapshot"]``: weights and rewards at each
+    block's end; ``records["failures"]``, ``["completions"]`` per block.
+    """
+
+    loop: rollout.LoopState
+    records: dict
+
+
+def train(
+    config: NetworkConfig,
+    params: NetworkParams,
+    seeds,
+    steps: int,
+    *,
+    env: SnakeEnv | None = None,
+    chunk_steps: int | None = None,
+    directory=None,
+    fingerprint: str = "",
+    progress: Callable | None = None,
+) -> TrainResult:
+    """Train one network per seed for ``steps`` control steps on the 8 (see the module docstring)."""
+    env = env_for("eight") if env is None else env
+    initial, loop = _members(env, config, params, seeds, False)
+    ctrl = controller(config)
+
+    def reset(state, failed, completed, *, key):
+        mirror = jnp.where(completed, ~state.info["mirror"], state.info["mirror"])
+        return env.restart(initial, state, mirror)
+
+    chunk = steps if chunk_steps is None else chunk_steps
+
+    @jax.jit
+    def advance(loop, n):
+        del n
+        run = lambda lp: rollout.rollout(  # noqa: E731
+            env.step, reset, ctrl, params, lp, chunk, summarize=_summary, every=BLOCK, snapshot=_snapshot
+        )
+        return jax.vmap(run)(loop)
+
+    loop, records = rollout.run_chunked(
+        lambda lp, n: advance(lp, n),
+        loop,
+        steps,
+        chunk,
+        directory=directory,
+        fingerprint=fingerprint,
+        progress=progress,
+        record_axis=1,
+    )
+    return TrainResult(loop, records)
+
+
+class TestTrace(NamedTuple):
+    """Every control step of a test, per seed: ``(seeds, steps)`` arrays (radians, metres)."""
+
+    a_head: np.ndarray
+    a_body: np.ndarray
+    d_body: np.ndarray
+    d_head: np.ndarray
+    failed: np.ndarray
+    completed: np.ndarray
+    head_xy: np.ndarray
+    target_xy: np.ndarray
+
+
+def test(
+    config: NetworkConfig,
+    params: NetworkParams,
+    networks,
+    track: str | tracks.Track,
+    steps: int | None = None,
+    *,
+    seeds,
+    progress=None,
+) -> TestTrace:
+    """Frozen networks (``networks``: a batched `robots.snake.rstdp.NetworkState`) on one pass of ``track``."""
+    import dataclasses
+
+    config = dataclasses.replace(config, learn=False)
+    env = env_for(track)
+    steps = lap_steps(env) if steps is None else steps
+    initial, loop = _members(env, config, params, seeds, False)
+    loop = loop._replace(controller=networks)
+    ctrl = controller(config)
+
+    def reset(state, failed, completed, *, key):
+        return env.restart(initial, state, state.info["mirror"])
+
+    def summary(loop, out, env_state):
+        m = env_state.metrics
+        return {
+            "a_head": m["a_head"],
+            "a_body": m["a_body"],
+            "d_body": out["d_body"],
+            "d_head": out["d_head"],
+            "failed": env_state.done > 0,
+            "completed": env_state.info["completed"],
+            "head_xy": env_state.pipeline_state.head_pos[:2],
+            "target_xy": env_state.info["target_xy"],
+        }
+
+    @jax.jit
+    def run(loop):
+        return jax.vmap(
+            lambda lp: rollout.rollout(env.step, reset, ctrl, params, lp, steps, summarize=summary, every=1)
+        )(loop)
+
+    _, records = run(loop)
+    last = jax.device_get(records["last"])
+    return TestTrace(**{k: np.asarray(last[k]) for k in TestTrace._fields})
