@@ -225,7 +225,7 @@ def run(
             rows += test_rows(topology, name, trace, env.dt, _windows(env))
         if progress:
             print(f"{topology}: {time.time() - t0:.0f} s")
-    write_csv(out / "snake_rstdp.csv", HEADER, rows)
+    write_csv(out / "snake_rstdp.csv", [dict(zip(HEADER, r)) for r in rows], HEADER)
     _plot_training(out / "snake_rstdp_training.png", train_records, env.dt)
     _plot_weights(out / "snake_rstdp_weights.png", train_records, env.dt)
     _plot_tests(out / "snake_rstdp_test.png", traces, env.dt)
@@ -413,7 +413,7 @@ def run_evaluate(*, out, weights, track, steps, no_progress) -> int:
             nets = networks_with(config, params, seeds, w1, w2)
             trace = training.test(config, params, nets, the_track, steps, seeds=seeds)
             rows += test_rows(topology, name, trace, env.dt, _windows(env))
-        write_csv(out / "snake_rstdp.csv", HEADER, rows)
+        write_csv(out / "snake_rstdp.csv", [dict(zip(HEADER, r)) for r in rows], HEADER)
         _print(rows)
         print(f"wrote {out}/snake_rstdp.csv")
     return 0

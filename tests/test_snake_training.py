@@ -1,0 +1,103 @@
+"""Training and testing the snake's R-STDP networks: batch invariance, episodes, resets, the commands."""
+
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from robots.snake import rstdp, tracks, training
+
+
+def test_a_seed_trains_to_the_same_weights_alone_or_in_a_batch_of_64():
+    config = rstdp.NetworkConfig(topology="separated")
+    params = rstdp.network_params(config)
+    env = training.env_for("eight")
+    batch = training.train(config, params, np.arange(64), training.BLOCK, env=env)
+    alone = training.train(config, params, np.array([5]), training.BLOCK, env=env)
+    for field in ("w_first", "w_hidden"):
+        a = np.asarray(getattr(alone.loop.controller, field))[0]
+        b = np.asarray(getattr(batch.loop.controller, field))[5]
+        np.testing.assert_array_equal(a, b)
+    assert not np.allclose(np.asarray(batch.loop.controller.w_first)[4], np.asarray(batch.loop.controller.w_first)[5])
+    np.testing.assert_array_equal(alone.records["mean"]["abs_head"][0], batch.records["mean"]["abs_head"][5])
+
+
+def test_a_completed_episode_runs_the_next_one_mirrored_and_keeps_the_weights():
+    short = tracks.from_waypoints([[0.0, 0.0], [0.3, 0.0]])  # the target reaches its end within seconds
+    env = training.env_for(short)
+    config = rstdp.NetworkConfig(topology="basic")
+    params = rstdp.network_params(config)
+    result = training.train(config, params, np.arange(2), 8 * training.BLOCK, env=env)
+    loop = result.loop
+    done = np.asarray(loop.completions)
+    assert done.max() >= 1 and (np.asarray(result.records["completions"]).sum(1) == done).all()
+    mirror = np.asarray(loop.env.info["mirror"])
+    np.testing.assert_array_equal(mirror, done % 2 == 1)
+    w0 = np.asarray(rstdp.network_init(config, params, key=jax.random.split(jax.random.PRNGKey(0))[0]).w_first)
+    assert not np.allclose(np.asarray(loop.controller.w_first)[0], w0)  # learning went on across the episodes
+
+
+def test_frozen_networks_do_not_change_and_the_trace_covers_every_step():
+    config = rstdp.NetworkConfig(topology="basic")
+    params = rstdp.network_params(config)
+    seeds = np.arange(2)
+    nets = jax.vmap(lambda k: rstdp.network_init(config, params, key=k))(jax.random.split(jax.random.PRNGKey(3), 2))
+    trace = training.test(config, params, nets, "zigzag", 60, seeds=seeds)
+    assert trace.a_head.shape == (2, 60) and trace.head_xy.shape == (2, 60, 2)
+    again = training.test(config, params, nets, "zigzag", 60, seeds=seeds)
+    np.testing.assert_array_equal(trace.a_head, again.a_head)  # deterministic given the seeds
+
+
+def _spikejax(*args):
+    return subprocess.run([sys.executable, "-m", "spikejax.cli", *args], capture_output=True, text=True, timeout=900)
+
+
+@pytest.mark.parametrize(
+    "flag, value, words", [("--topologies", "deep", "unknown deep"), ("--train-laps", "0", "positive")]
+)
+def test_reproduce_refuses_bad_flags_in_one_line(tmp_path, flag, value, words):
+    r = _spikejax("reproduce", "snake-rstdp", "--out", str(tmp_path / "o"), flag, value)
+    assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_reproduce_and_evaluate_small(tmp_path):
+    out = tmp_path / "run"
+    args = ["--out", str(out), "--seeds", "2", "--train-laps", "0.01", "--topologies", "basic", "--test-steps", "50"]
+    r = _spikejax("reproduce", "snake-rstdp", *args, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    import csv
+
+    rows = list(csv.DictReader(open(out / "snake_rstdp.csv")))
+    assert {row["track"] for row in rows} == {"ladder", "ladder-mirror", "zigzag", "zigzag-mirror"}
+    assert {row["window_steps"] for row in rows} == {"125", "625"}
+    assert all(row["seeds"] == "2" and float(row["ci_low"]) <= float(row["mean_head_angle_deg"]) for row in rows)
+    with np.load(out / "weights" / "basic.npz") as z:
+        assert z["w_first"].shape == (2, 10, 2)
+    for png in ("training", "weights", "test", "trajectories"):
+        assert (out / f"snake_rstdp_{png}.png").stat().st_size > 10_000
+
+    track = tmp_path / "track.csv"
+    track.write_text("x,y\n0,0\n1,0\n1,1\n")
+    r = _spikejax(
+        "evaluate",
+        "snake-rstdp",
+        "--weights",
+        str(out),
+        "--track",
+        str(track),
+        "--out",
+        str(tmp_path / "ev"),
+        "--steps",
+        "50",
+    )
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader(open(tmp_path / "ev" / "snake_rstdp.csv")))
+    assert {row["track"] for row in rows} == {"track.csv"} and rows[0]["topology"] == "basic"
+
+    track.write_text("x,y\n0,0\n")
+    r = _spikejax(
+        "evaluate", "snake-rstdp", "--weights", str(out), "--track", str(track), "--out", str(tmp_path / "ev2")
+    )
+    assert r.returncode == 2 and "at least two" in r.stderr and len(r.stderr.strip().splitlines()) == 1
