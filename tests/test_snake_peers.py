@@ -66,13 +66,13 @@ def test_structure_and_weights_as_the_jax_config(topology):
         np.testing.assert_array_equal(got2 != 0, config.hidden_mask)
     # every connection is plastic with the group's own parameters, 1 ms delay
     p = network_params(config)
-    st = net.connections("first").get(["tau_c", "A_plus", "delay"])
-    np.testing.assert_allclose(st["tau_c"], float(p.first.tau_c))
-    np.testing.assert_allclose(st["A_plus"], float(p.first.A_plus))
-    np.testing.assert_allclose(st["delay"], 1.0)
+    np.testing.assert_allclose(net.connections("first").get("delay"), 1.0)
+    first_model = nest.GetDefaults(net.models["first"])  # common properties live on the copied model
+    for key in ("tau_c", "A_plus", "A_minus", "tau_n", "Wmax"):
+        assert first_model[key] == pytest.approx(float(getattr(p.first, key)))
     if config.hidden:
         assert float(p.first.tau_c) == 5 * float(p.second.tau_c)
-        np.testing.assert_allclose(net.connections("hidden").get("tau_c"), float(p.second.tau_c))
+        assert nest.GetDefaults(net.models["hidden"])["tau_c"] == pytest.approx(float(p.second.tau_c))
 
 
 @pytest.mark.parametrize("topology", ["basic", "unified"])
