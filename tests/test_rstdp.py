@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from spikejax.errors import UserError
-from spikejax.plasticity import RSTDPNestState, RSTDPParams, replay, rstdp, rstdp_params, set_dopamine
+from spikejax.plasticity import RSTDPNestState, RSTDPParams, replay, rstdp_params, set_dopamine
+from spikejax.plasticity.rstdp import rstdp
 
 H = 0.1  # ms, NEST's default resolution
 D = 1.0  # ms, every delay of the NEST networks below

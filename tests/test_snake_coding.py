@@ -140,3 +140,29 @@ def test_poisson_counts_match_nest_poisson_generator():
         for p, observed in ((math.exp(-lam), np.mean(counts == 0)), (math.exp(-lam) * lam, np.mean(counts == 1))):
             assert abs(observed - p) < N_SE * math.sqrt(p * (1 - p) / size)
     assert table.max() > 1  # multiplicity, not a Bernoulli spike
+
+
+@pytest.mark.parametrize("lam", [0.01, 0.3, 1.8, 4.0])
+def test_poisson_count_train_has_the_poisson_pmf(lam):
+    from spikejax.coding import poisson_count_train
+
+    steps, n = 20_000, 8
+    counts = np.asarray(poisson_count_train(jnp.full(n, lam / 1e-4), 1e-4, steps, key=jax.random.key(7)))
+    assert counts.shape == (steps, n) and counts.dtype == np.int32
+    total = steps * n
+    for k in range(6):
+        p = math.exp(-lam) * lam**k / math.factorial(k)
+        assert abs(np.mean(counts == k) - p) < N_SE * math.sqrt(p * (1 - p) / total) + 1e-6
+    assert abs(counts.mean() - lam) < N_SE * math.sqrt(lam / total)
+
+
+def test_poisson_count_train_clips_at_max_count_and_is_silent_at_zero():
+    from spikejax.coding import poisson_count_train
+
+    lam, steps = 3.0, 40_000
+    counts = np.asarray(
+        poisson_count_train(jnp.array([0.0, lam / 1e-3]), 1e-3, steps, key=jax.random.key(8), max_count=2)
+    )
+    assert (counts[:, 0] == 0).all() and counts[:, 1].max() == 2
+    p_clipped = 1.0 - math.exp(-lam) * (1.0 + lam)  # P(N >= 2) lands on 2
+    assert abs(np.mean(counts[:, 1] == 2) - p_clipped) < N_SE * math.sqrt(p_clipped * (1 - p_clipped) / steps)

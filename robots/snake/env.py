@@ -299,8 +299,20 @@ class SnakeEnv(Env):
 
         No rendering: ``initial`` is computed once, so an in-graph reset of
         one member of a batch costs a selection, not a second camera frame.
+        The camera's last frame is kept as both frames (no events until the
+        next step renders the restarted scene), which also spares selecting
+        whole frames where a batch's members did not restart.
         """
-        info = dict(initial.info, params=state.info["params"], mirror=jnp.asarray(mirror, bool), rng=state.info["rng"])
+        frame = state.info["frame"]
+        info = dict(
+            initial.info,
+            params=state.info["params"],
+            mirror=jnp.asarray(mirror, bool),
+            rng=state.info["rng"],
+            frame=frame,
+            prev_frame=frame,
+            events=initial.info["events"] if self.compact_events else state.info["events"],
+        )
         return initial.replace(info=info)
 
     # ------------------------------------------------------------ parts

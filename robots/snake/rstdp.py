@@ -32,7 +32,9 @@ resolution):
    (``hidden_reward="head"``). Each reward becomes the dopamine concentration
    ``n`` of the synapses onto its neuron (`spikejax.plasticity.rstdp.set_dopamine`),
    as the authors' group set ``n`` with NEST's ``SetStatus`` each step;
-2. input rates: the frame-difference events of the last step counted in the
+2. input rates (held for the control step, each neural step's generator
+   counts drawn as NEST's ``poisson_generator`` draws them,
+   `spikejax.coding.poisson_count_train`): the frame-difference events of the last step counted in the
    2 x 5 grid of the ROI (Eq. (2), `spikejax.coding.grid_counts` and
    `spikejax.coding.grid_rates`), and for the multi-layer nets the antagonist
    rates of joints 1, 3 and 5 (Eq. (3), `spikejax.coding.antagonist_rates`);
@@ -438,9 +440,7 @@ def network_step(
     """
     r_first, r_body, r_hidden = network_rewards(config, params, state, jnp.rad2deg(obs[0]), jnp.rad2deg(obs[1]))
     rates = network_rates(config, params, frames, obs)
-    generated = coding.poisson_counts(
-        jnp.broadcast_to(rates, (config.substeps, rates.shape[0])), 0.001 * config.dt, key=key
-    )
+    generated = coding.poisson_count_train(rates, 0.001 * config.dt, config.substeps, key=key)
     state, counts = network_run(config, params, state, generated, r_first, r_body)
     state = network_decode(config, params, state, counts)._replace(r_first=r_first, r_hidden=r_hidden)
     return state, jnp.stack([state.d_body, state.d_head])
