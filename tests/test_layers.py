@@ -1,7 +1,7 @@
 """The house's layers, checked from the code's imports (every ``import``, at the top or inside a function).
 
     commands, benchmarks   spikejax/cli.py, spikejax/commands/, spikejax/benchmarking.py,
-                           robots/*/reproduce.py, robots/*/bench*.py, benchmarks/
+                           robots/*/reproduce*.py, robots/*/bench*.py, benchmarks/
     robots                 robots/ (robots, tasks, controllers, their peers and references)
     library                the rest of spikejax/: numerics and host-side infrastructure
 
@@ -57,7 +57,7 @@ def _is_app(path: Path) -> bool:
         rel == "spikejax/cli.py"
         or rel.startswith(("spikejax/commands/", "benchmarks/"))
         or rel == "spikejax/benchmarking.py"
-        or (rel.startswith("robots/") and (path.name == "reproduce.py" or path.name.startswith("bench")))
+        or (rel.startswith("robots/") and path.name.startswith(("reproduce", "bench")))
     )
 
 
