@@ -240,7 +240,11 @@ def rollout(
         return loop, (dict(summary), failed, completed)
 
     def block(loop: LoopState, _):
-        loop, (summary, failed, completed) = jax.lax.scan(one_step, loop, None, length=every)
+        if every == 1:  # no inner loop: its carry, the whole env state, would be copied in and out every step
+            loop, (summary, failed, completed) = one_step(loop, None)
+            summary, failed, completed = jax.tree.map(lambda x: x[None], (summary, failed, completed))
+        else:
+            loop, (summary, failed, completed) = jax.lax.scan(one_step, loop, None, length=every)
         record = {
             "mean": jax.tree.map(lambda x: jnp.mean(x, axis=0), summary),
             "last": jax.tree.map(lambda x: x[-1], summary),

@@ -34,3 +34,17 @@ def test_robobee_notebook_executes(monkeypatch):
     assert sum(o.output_type == "display_data" for o in outputs) >= 2
     text = "".join(o.get("text", "") for o in outputs)
     assert "of 4 randomised robots reached both waypoints" in text
+
+
+def test_snake_rstdp_notebook_executes(monkeypatch):
+    monkeypatch.setenv("SPIKEJAX_NB_SEEDS", "2")
+    monkeypatch.setenv("SPIKEJAX_NB_STEPS", "100")
+    nb = nbformat.read(NOTEBOOKS / "snake_rstdp.ipynb", as_version=4)
+    nbclient.NotebookClient(
+        nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+    ).execute()
+    outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    assert sum(o.output_type == "display_data" for o in outputs) >= 2  # weights and angles, test traces
+    text = "".join(o.get("text", "") for o in outputs)
+    assert "failures per seed during training" in text and "mean |MA a_head| deg" in text
