@@ -50,7 +50,7 @@ def test_bad_configs_get_one_line_errors():
 
 
 def test_rewards_by_hand():
-    a_head, a_body = 10.0, -4.0
+    a_head, a_body = 10.0, -4.0  # any unit: Eq. (9) scales them
     config, params, state = _net("basic")
     first, _, _ = rstdp.network_rewards(config, params, state, a_head, a_body)
     np.testing.assert_allclose(first, [-10.0 * 1e-4, 10.0 * 1e-4], rtol=1e-6)  # Eq. (9), body constants (U22)
@@ -132,7 +132,7 @@ def test_reward_on_the_right_potentiates_the_right_inputs_onto_the_right_neuron(
     for _ in range(25):
         key, sub = jax.random.split(key)
         generated = coding.poisson_counts(jnp.broadcast_to(rates, (config.substeps, 16)), 1e-4, key=sub)
-        state, _ = run(state, generated, jnp.asarray(rstdp.network_rewards(config, params, state, 20.0, 20.0)[0]))
+        state, _ = run(state, generated, jnp.asarray(rstdp.network_rewards(config, params, state, 0.35, 0.35)[0]))
     dw = np.asarray(state.w_first) - w0
     right = [3, 4, 8, 9]
     assert (dw[right, 1] > 0).all() and (dw[right, 0] < 0).all()

@@ -29,12 +29,13 @@ def test_a_completed_episode_runs_the_next_one_mirrored_and_keeps_the_weights():
     env = training.env_for(short)
     config = rstdp.NetworkConfig(topology="basic")
     params = rstdp.network_params(config)
-    result = training.train(config, params, np.arange(2), 8 * training.BLOCK, env=env)
-    loop = result.loop
-    done = np.asarray(loop.completions)
-    assert done.max() >= 1 and (np.asarray(result.records["completions"]).sum(1) == done).all()
-    mirror = np.asarray(loop.env.info["mirror"])
-    np.testing.assert_array_equal(mirror, done % 2 == 1)
+    for on_failure in (False, True):
+        result = training.train(config, params, np.arange(2), 8 * training.BLOCK, env=env, mirror_on_failure=on_failure)
+        loop = result.loop
+        done = np.asarray(loop.completions)
+        assert done.max() >= 1 and (np.asarray(result.records["completions"]).sum(1) == done).all()
+        flips = done + (np.asarray(loop.failures) if on_failure else 0)
+        np.testing.assert_array_equal(np.asarray(loop.env.info["mirror"]), flips % 2 == 1)
     w0 = np.asarray(rstdp.network_init(config, params, key=jax.random.split(jax.random.PRNGKey(0))[0]).w_first)
     assert not np.allclose(np.asarray(loop.controller.w_first)[0], w0)  # learning went on across the episodes
 

@@ -19,6 +19,11 @@ images) and writes, in ``--out``:
   test track: Fig. 10) and ``snake_rstdp_trajectories.png``.
 
 ``evaluate`` tests saved weights on any track, a name or a CSV of waypoints.
+
+``reproduce snake-rstdp-choices`` runs ``sweeps/snake_rstdp_choices.toml``
+(the rate cap of Eq. (2), the steering range, the scale of ``C_reward``) and
+writes ``snake_rstdp_choices.csv`` and ``snake_rstdp_choices.png``, heat maps of
+the test's failures per minute and mean head angle over the grid.
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ from spikejax.commands import Command, add_common, count, output_directory
 from spikejax.errors import UserError
 from spikejax.stats import mean_interval, wilson_interval
 
-__all__ = ["reproduce_command", "evaluate_command", "TEST_TRACKS", "HEADER"]
+__all__ = ["reproduce_command", "evaluate_command", "choices_command", "TEST_TRACKS", "HEADER"]
 
 TEST_TRACKS = ("ladder", "ladder-mirror", "zigzag", "zigzag-mirror")
 PAPER = {
@@ -428,4 +433,96 @@ evaluate_command = Command(
     help="test saved snake R-STDP networks on any track (a name or a CSV of waypoints)",
     add_arguments=_add_evaluate_arguments,
     run=run_evaluate,
+)
+
+
+CHOICE_AXES = ("max_rate", "max_steer", "c_reward_scale")
+CHOICE_METRICS = (
+    "test_failures_per_min",
+    "test_head_angle_deg",
+    "test_abs_head_deg",
+    "train_failures_per_min",
+    "test_failed",
+)
+
+
+def choices_rows(table: dict) -> list[list]:
+    """Per cell of the grid: the seeds' mean of each metric and a 95 % interval (Wilson for ``test_failed``)."""
+    keys = np.stack([table[a] for a in CHOICE_AXES], axis=1)
+    rows = []
+    for cell in np.unique(keys, axis=0):
+        sel = np.all(keys == cell, axis=1)
+        row = [float(v) for v in cell] + [int(sel.sum())]
+        for m in CHOICE_METRICS:
+            x = np.asarray(table[m], float)[sel]
+            if m == "test_failed":
+                lo, hi = wilson_interval(int(x.sum()), int(sel.sum()))
+                row += [round(float(x.mean()), 3), round(float(lo), 3), round(float(hi), 3)]
+            else:
+                mean, lo, hi = mean_interval(x)
+                row += [round(mean, 3), round(lo, 3), round(hi, 3)]
+        rows.append(row)
+    return rows
+
+
+def _plot_choices(path: Path, header, rows) -> None:
+    from matplotlib.figure import Figure
+
+    col = {h: i for i, h in enumerate(header)}
+    rates = sorted({r[0] for r in rows})
+    steers = sorted({r[1] for r in rows})
+    scales = sorted({r[2] for r in rows})
+    fig = Figure(figsize=(4.2 * len(rates), 6.5), layout="constrained")
+    for j, (metric, label) in enumerate(
+        (("test_failures_per_min", "test failures / min"), ("test_head_angle_deg", "test mean |MA a_head| (deg)"))
+    ):
+        for i, rate in enumerate(rates):
+            ax = fig.add_subplot(2, len(rates), j * len(rates) + i + 1)
+            grid = np.full((len(steers), len(scales)), np.nan)
+            for r in rows:
+                if r[0] == rate:
+                    grid[steers.index(r[1]), scales.index(r[2])] = r[col[metric]]
+            im = ax.imshow(grid, cmap="viridis_r", aspect="auto")
+            for (a, b), v in np.ndenumerate(grid):
+                ax.text(b, a, f"{v:.1f}", ha="center", va="center", color="w", fontsize=8)
+            ax.set_xticks(range(len(scales)), [f"{v:g}" for v in scales])
+            ax.set_yticks(range(len(steers)), [f"{v:g}" for v in steers])
+            ax.set_xlabel("C_reward scale")
+            ax.set_ylabel("max steer (rad)")
+            cap = "no cap" if rate >= 1e8 else f"cap {rate:g} Hz"
+            ax.set_title(f"{label}, {cap}", fontsize=8)
+            fig.colorbar(im, ax=ax, shrink=0.8)
+    fig.suptitle("Basic SNN trained 60 s on the 8, tested 60 s on the zigzag (mean over seeds)")
+    fig.savefig(path, dpi=110)
+
+
+def _add_choices_arguments(parser) -> None:
+    add_common(parser, trials="seeds per cell (default: the sweep file's 8)", chunk_size=True)
+
+
+def run_choices(*, out, trials, chunk_size, no_progress) -> int:
+    """``spikejax reproduce snake-rstdp-choices --out DIR``: the sweep, its table and heat maps."""
+    from robots.common import run_named_sweep
+
+    with output_directory(out, command="reproduce snake-rstdp-choices") as out:
+        table = run_named_sweep(
+            "snake_rstdp_choices", out, trials=trials, chunk_size=chunk_size, progress=not no_progress
+        )
+        header = (
+            list(CHOICE_AXES) + ["seeds"] + [f"{m}{s}" for m in CHOICE_METRICS for s in ("", "_ci_low", "_ci_high")]
+        )
+        rows = choices_rows(table)
+        write_csv(out / "snake_rstdp_choices.csv", [dict(zip(header, r)) for r in rows], header)
+        _plot_choices(out / "snake_rstdp_choices.png", header, rows)
+        print("max_rate  max_steer  C_reward x  seeds  test failures/min  test |MA a_head| deg")
+        for r in rows:
+            print(f"{r[0]:8.3g}  {r[1]:9.3g}  {r[2]:10.3g}  {r[3]:5d}  {r[4]:17.2f}  {r[7]:19.2f}")
+        print(f"wrote {out}/snake_rstdp_choices.csv, snake_rstdp_choices.png")
+    return 0
+
+
+choices_command = Command(
+    help="the unstated choices of the snake R-STDP paper (rate cap, steering range, C_reward) over a grid of seeds",
+    add_arguments=_add_choices_arguments,
+    run=run_choices,
 )

@@ -51,7 +51,6 @@ A failure reset forgets only ``D_body`` and ``D_head`` (`controller`'s
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import NamedTuple
 
 import jax
@@ -192,7 +191,7 @@ class NetworkParams(NamedTuple):
         w_low, w_high: initial weights drawn uniformly from ``[w_low, w_high)``, pA.
         eta_head, eta_body: Eq. (5)'s eta (Sec. III-B: 0.02, 0.07).
         c_reward_head, c_reward_body: Eq. (9)'s C_reward (Sec. III-B: 0.0004,
-            0.0001), per degree of ``a_target``.
+            0.0001), per radian of ``a_target``.
         k_joint: Eq. (3)'s k, Hz per degree of joint angle.
         max_rate: cap of Eq. (2)'s rates, Hz (``inf``: the literal equation).
     """
@@ -221,21 +220,35 @@ def network_params(
     c_reward_head: float = 0.0004,
     c_reward_body: float = 0.0001,
     k_joint: float = 10.0,
-    max_rate: float = math.inf,
+    max_rate: float = 300.0,
     A_plus: float = 1.0,
-    A_minus: float = 1.0,
+    A_minus: float = 0.5,
     tau_c: float = 1000.0,
     tau_n: float = 200.0,
     Wmax: float = 3000.0,
 ) -> NetworkParams:
-    """The paper's values where it states them, the defaults of SPEC U3-U22 where it does not.
+    """The paper's values where it states them; where it does not, these, each with its reason.
 
-    Unstated, with their sources: NEST's ``iaf_psc_alpha`` defaults (U3);
-    ``A_plus = A_minus = 1``, ``tau_c = 1000`` ms, ``tau_n = 200`` ms, ``b = 0``,
-    ``Wmin = 0``, ``Wmax = 3000`` pA and initial weights in ``[200, 201)`` pA as
-    in the public NEST code of the authors' group for lane keeping (U13-U18);
-    ``k_joint = 10`` Hz per degree (U11); the hidden layer's ``tau_c`` five
-    times larger with windows five times smaller (U16); no rate cap (U8).
+    Stated (Sec. III-B): ``eta`` 0.02 (head) and 0.07 (body), ``C_reward``
+    0.0004 (head) and 0.0001 (body). Unstated, and chosen:
+
+    * NEST's ``iaf_psc_alpha`` defaults for every LIF; ``tau_c = 1000`` ms,
+      ``tau_n = 200`` ms, ``b = 0``, ``Wmin = 0``, ``Wmax = 3000`` pA, initial
+      weights uniform in ``[200, 201)`` pA and ``A_plus = 1`` as in the public
+      NEST code of the authors' group for lane keeping;
+    * ``A_minus = 0.5``, not that code's 1 (nor NEST's default 1.5): with
+      balanced windows and inputs and outputs firing steadily, the eligibility
+      of Eq. (6) follows minus the rate of change of each input (depression
+      when it switches on), so the inputs seeing the target carried negative
+      eligibility while rewarded and every seed learned the crossed mapping
+      (right image columns onto the left output); with 0.5 the eligibility
+      follows the input and every seed learns right onto right;
+    * ``a_target`` of Eq. (9) in radians: in degrees, ``C_reward = 1e-4``
+      drove the weights to their bounds within 90 s and tested worse;
+    * rates of Eq. (2) capped at 300 Hz, as that lane-keeping code caps its
+      inputs (the literal rates reach 18 kHz here and saturate the outputs);
+    * ``k_joint = 10`` Hz per degree (Eq. (3)); the hidden layer's ``tau_c``
+      five times larger with windows five times smaller (Sec. III-C-1).
     """
     f = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
     base = dict(A_plus=A_plus, A_minus=A_minus, tau_c=tau_c, tau_n=tau_n, Wmin=0.0, Wmax=Wmax)
@@ -321,7 +334,7 @@ def network_rewards(config: NetworkConfig, params: NetworkParams, state: Network
     """Rewards ``(r_first, r_body, r_hidden)`` of the first layer's neurons, the body pair and the hidden neurons.
 
     Eq. (9) per pair, Eq. (11) (unified) or Eq. (13) (separated) for the
-    hidden neurons, from ``a_head`` and ``a_body`` in degrees (SPEC U21).
+    hidden neurons, from ``a_head`` and ``a_body`` in radians (see `network_params`).
     """
     head = rewards.pair_rewards(a_head, params.c_reward_head)
     body = rewards.pair_rewards(a_body, params.c_reward_body)
@@ -438,7 +451,7 @@ def network_step(
         frames: ``(prev_frame, frame, threshold)``, as `network_rates` takes them.
         obs: the env's observation ``[a_head, a_body, alpha_1 .. alpha_16]`` (rad).
     """
-    r_first, r_body, r_hidden = network_rewards(config, params, state, jnp.rad2deg(obs[0]), jnp.rad2deg(obs[1]))
+    r_first, r_body, r_hidden = network_rewards(config, params, state, obs[0], obs[1])
     rates = network_rates(config, params, frames, obs)
     generated = coding.poisson_count_train(rates, 0.001 * config.dt, config.substeps, key=key)
     state, counts = network_run(config, params, state, generated, r_first, r_body)
