@@ -76,8 +76,17 @@ HEADER = [
 ]
 
 
-def _config(topology: str, **kw) -> rstdp.NetworkConfig:
-    return rstdp.NetworkConfig(topology=topology, **kw)
+VARIANTS = {
+    "head": {"hidden_reward": "head"},  # reading B: the synapses onto H keep the head reward
+    "printed": {"eq13_sign": "printed"},  # Eq. (13) with the paper's printed minus
+    "negative-left": {"joints_left": "negative"},  # the other assignment of joint neurons to the groups
+}
+
+
+def _config(name: str) -> rstdp.NetworkConfig:
+    """A topology, or ``TOPOLOGY/VARIANT`` for an ablation (`VARIANTS`)."""
+    topology, _, variant = name.partition("/")
+    return rstdp.NetworkConfig(topology=topology, **VARIANTS.get(variant, {}))
 
 
 def _windows(env) -> tuple[int, ...]:
@@ -101,7 +110,8 @@ def load_weights(path: Path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
             out = topology, z["seeds"], z["w_first"], z["w_hidden"]
     except (OSError, KeyError, ValueError) as e:
         raise UserError(f"{path}: not a snake-rstdp weights file ({e.__class__.__name__})") from None
-    if topology not in rstdp.TOPOLOGIES:
+    base, _, variant = topology.partition("/")
+    if base not in rstdp.TOPOLOGIES or (variant and variant not in VARIANTS):
         raise UserError(f"{path}: unknown topology {topology!r}")
     return out
 
@@ -153,7 +163,7 @@ def test_rows(topology: str, track_name: str, trace: training.TestTrace, dt: flo
                 round(float(col("completed").mean()), 3),
                 round(float(col("steering_changes_per_100s").mean()), 3),
                 round(float(col("time_at_limit").mean()), 3),
-                PAPER[topology],
+                PAPER[topology] if topology in PAPER else f"ablation of {topology.partition('/')[0]}",
             ]
         )
     return rows
@@ -197,7 +207,7 @@ def run(
     for topology in topologies:
         config, t0 = _config(topology), time.time()
         params = rstdp.network_params(config)
-        weights = out / "weights" / f"{topology}.npz"
+        weights = out / "weights" / f"{topology.replace('/', '-')}.npz"
         if not weights.exists():
             result = training.train(
                 config,
@@ -206,18 +216,18 @@ def run(
                 steps,
                 env=env,
                 chunk_steps=chunk,
-                directory=out / "checkpoints" / topology,
+                directory=out / "checkpoints" / topology.replace("/", "-"),
                 fingerprint=json.dumps([dataclasses.asdict(config), seeds, steps, chunk]),
                 progress=_progress_bar(f"train {topology}", steps, progress),
             )
-            np.savez(out / "training" / f"{topology}.npz", **_flatten(jax.device_get(result.records)))
+            np.savez(out / "training" / f"{topology.replace('/', '-')}.npz", **_flatten(jax.device_get(result.records)))
             save_weights(weights, topology, seed_list, result.loop)
         _, saved_seeds, w1, w2 = load_weights(weights)
-        with np.load(out / "training" / f"{topology}.npz") as z:
+        with np.load(out / "training" / f"{topology.replace('/', '-')}.npz") as z:
             train_records[topology] = dict(z)
         nets = networks_with(config, params, saved_seeds, w1, w2)
         for name in TEST_TRACKS:
-            cache = out / "tests" / f"{topology}-{name}.npz"
+            cache = out / "tests" / f"{topology.replace('/', '-')}-{name}.npz"
             if cache.exists():
                 with np.load(cache) as z:
                     trace = training.TestTrace(**{k: z[k] for k in training.TestTrace._fields})
@@ -234,8 +244,85 @@ def run(
     _plot_training(out / "snake_rstdp_training.png", train_records, env.dt)
     _plot_weights(out / "snake_rstdp_weights.png", train_records, env.dt)
     _plot_tests(out / "snake_rstdp_test.png", traces, env.dt)
+    hidden = {t: r for t, r in train_records.items() if t.partition("/")[0] in ("unified", "separated")}
+    if hidden:
+        write_csv(out / "snake_rstdp_hidden.csv", hidden_rows(hidden), HIDDEN_HEADER)
+        _plot_hidden(out / "snake_rstdp_hidden.png", hidden, env.dt)
     _plot_trajectories(out / "snake_rstdp_trajectories.png", traces)
     return rows
+
+
+HIDDEN_HEADER = [
+    "topology",
+    "seeds",
+    "reward_ratio",
+    "reward_ratio_ci_low",
+    "reward_ratio_ci_high",
+    "w_balance",
+    "w_balance_ci_low",
+    "w_balance_ci_high",
+]
+
+
+def hidden_rows(records) -> list[dict]:
+    """Why a hidden layer learns or not, per topology, over seeds.
+
+    ``reward_ratio``: the mean ``|r|`` the head neurons ``H_L, H_R`` got from
+    Eq. (11) or (13) over the mean ``|r|`` of the body outputs they project to,
+    over training (Eq. (11) divides the sum of two opposite rewards, so it
+    tends to 0 as a hidden neuron's two weights equalise: the paper's guess for
+    the unified net's failure); ``w_balance``: ``|w_R - w_L| / (w_R + w_L)`` of
+    the ``H`` neurons' synapses onto the body outputs at the end (1 for the
+    separated net, whose ``H`` have one synapse each).
+    """
+    rows = []
+    for topology, r in records.items():
+        r_h = np.abs(r["snapshot.r_hidden"][:, :, :2]).mean(axis=(1, 2))
+        body = np.abs(r["mean.a_body"]).mean(1) * 1e-4  # |r| of the body pair, C_reward_body |a_body| (block means)
+        ratio = r_h / np.maximum(body, 1e-12)
+        w = r["snapshot.w_hidden"][:, -1, :2, :]  # (seeds, H, [B_L, B_R])
+        balance = (np.abs(w[..., 1] - w[..., 0]) / np.maximum(w.sum(-1), 1e-9)).mean(1)
+        m1, l1, h1 = mean_interval(ratio)
+        m2, l2, h2 = mean_interval(balance)
+        rows.append(
+            dict(
+                zip(
+                    HIDDEN_HEADER,
+                    [
+                        topology,
+                        len(ratio),
+                        round(m1, 4),
+                        round(l1, 4),
+                        round(h1, 4),
+                        round(m2, 4),
+                        round(l2, 4),
+                        round(h2, 4),
+                    ],
+                )
+            )
+        )
+    return rows
+
+
+def _plot_hidden(path: Path, records, dt):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 3.0 * len(records)), layout="constrained")
+    for i, (topology, r) in enumerate(records.items()):
+        t = (np.arange(r["snapshot.r_hidden"].shape[1]) + 1) * training.BLOCK * dt
+        ax = fig.add_subplot(len(records), 2, 2 * i + 1)
+        ax.plot(t, np.median(np.abs(r["snapshot.r_hidden"][:, :, :2]).mean(-1), 0), label="|r| of H (Eq. 11 / 13)")
+        ax.plot(t, np.median(np.abs(r["mean.a_body"]) * 1e-4, 0), label="|r| of the body pair (Eq. 9)")
+        ax.set_yscale("log")
+        ax.set_title(f"{topology}: rewards over training (median over seeds)", fontsize=9)
+        ax.legend(fontsize=7)
+        ax = fig.add_subplot(len(records), 2, 2 * i + 2)
+        w = r["snapshot.w_hidden"][:, :, :2, :]
+        ax.plot(t, np.median(w[..., 1] - w[..., 0], 0), lw=0.8)
+        ax.set_title(f"{topology}: w(H -> B_R) - w(H -> B_L) of H_L, H_R (median)", fontsize=9)
+        ax.set_ylabel("pA")
+    fig.axes[-1].set_xlabel("training time (s)")
+    fig.savefig(path, dpi=110)
 
 
 def _flatten(tree, prefix=""):
@@ -276,7 +363,7 @@ def _plot_weights(path: Path, records, dt):
 
     fig = Figure(figsize=(12, 2.6 * len(records)), layout="constrained")
     for i, (topology, r) in enumerate(records.items()):
-        hidden = topology in ("unified", "separated")
+        hidden = topology.partition("/")[0] in ("unified", "separated")
         w = r["snapshot.w_hidden"] if hidden else r["snapshot.w_first"]
         t = (np.arange(w.shape[1]) + 1) * training.BLOCK * dt
         ax = fig.add_subplot(len(records), 1, i + 1)
@@ -292,7 +379,7 @@ def _plot_weights(path: Path, records, dt):
 def _plot_tests(path: Path, traces, dt):
     from matplotlib.figure import Figure
 
-    topologies = sorted({k[0] for k in traces}, key=rstdp.TOPOLOGIES.index)
+    topologies = list(dict.fromkeys(k[0] for k in traces))
     fig = Figure(figsize=(14, 2.4 * len(topologies)), layout="constrained")
     for i, topology in enumerate(topologies):
         for j, name in enumerate(TEST_TRACKS):
@@ -324,7 +411,7 @@ def _plot_tests(path: Path, traces, dt):
 def _plot_trajectories(path: Path, traces):
     from matplotlib.figure import Figure
 
-    topologies = sorted({k[0] for k in traces}, key=rstdp.TOPOLOGIES.index)
+    topologies = list(dict.fromkeys(k[0] for k in traces))
     fig = Figure(figsize=(14, 3.2 * len(topologies)), layout="constrained")
     for i, topology in enumerate(topologies):
         for j, name in enumerate(TEST_TRACKS):
@@ -342,7 +429,11 @@ def _plot_trajectories(path: Path, traces):
 
 def _topologies(text: str) -> tuple[str, ...]:
     names = tuple(t.strip() for t in text.split(",") if t.strip())
-    bad = [t for t in names if t not in rstdp.TOPOLOGIES]
+    bad = [
+        t
+        for t in names
+        if t.partition("/")[0] not in rstdp.TOPOLOGIES or (t.partition("/")[2] and t.partition("/")[2] not in VARIANTS)
+    ]
     if bad or not names:
         raise UserError(
             f"--topologies: unknown {', '.join(bad) or '(none)'}; choose from {', '.join(rstdp.TOPOLOGIES)}"
