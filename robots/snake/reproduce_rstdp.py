@@ -1,6 +1,8 @@
 """``spikejax reproduce snake-rstdp`` and ``spikejax evaluate snake-rstdp``: Sec. III-IV of the snake R-STDP paper, many seeds.
 
-``reproduce`` trains every topology (`robots.snake.rstdp.TOPOLOGIES`) for
+``reproduce`` trains every topology (`robots.snake.rstdp.TOPOLOGIES`, and
+the separated net with Eq. (13) as printed, ``separated/printed``, beside the
+default sign of Eq. (10)) for
 ``--train-laps`` passes of the 8 (`robots.snake.training.train`, all seeds in
 one vmapped program, checkpointed so a killed run resumes), tests the frozen
 networks on one pass of each test track (ladder, zigzag and their mirror
@@ -76,6 +78,7 @@ HEADER = [
 ]
 
 
+DEFAULT_TOPOLOGIES = (*rstdp.TOPOLOGIES, "separated/printed")  # both signs of Eq. (13), measured side by side
 VARIANTS = {
     "head": {"hidden_reward": "head"},  # reading B: the synapses onto H keep the head reward
     "printed": {"eq13_sign": "printed"},  # Eq. (13) with the paper's printed minus
@@ -450,7 +453,12 @@ def _add_reproduce_arguments(parser) -> None:
         default=2.0,
         help="training length in passes of the 8 at the snake's speed (default 2)",
     )
-    parser.add_argument("--topologies", default=",".join(rstdp.TOPOLOGIES), help="comma-separated, default all four")
+    parser.add_argument(
+        "--topologies",
+        default=",".join(DEFAULT_TOPOLOGIES),
+        help="comma-separated, default the four and separated/printed; TOPOLOGY/head (the hidden synapses keep the "
+        "head reward), /printed (Eq. (13) as printed), /negative-left (the joint neurons' other grouping)",
+    )
     parser.add_argument(
         "--test-steps", type=count, default=None, help="control steps per test track (default: one pass)"
     )
