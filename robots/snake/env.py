@@ -189,6 +189,11 @@ class SnakeEnv(Env):
     # ------------------------------------------------------------ Brax interface
 
     @property
+    def track(self) -> tracks.Track:
+        """The track as built (not mirrored)."""
+        return self._track
+
+    @property
     def dt(self) -> float:
         """Control step, s."""
         return self.physics.dt * self.physics.substeps

@@ -62,7 +62,7 @@ def env_for(track="eight", **kwargs) -> SnakeEnv:
 
 def lap_steps(env: SnakeEnv, slack: float = 1.25) -> int:
     """Control steps for one pass of ``env``'s track at the snake's straight speed, times ``slack``, whole blocks."""
-    steps = float(env._track.length) / SNAKE_SPEED / env.dt * slack
+    steps = float(env.track.length) / SNAKE_SPEED / env.dt * slack
     return int(math.ceil(steps / BLOCK) * BLOCK)
 
 
