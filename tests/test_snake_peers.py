@@ -114,6 +114,7 @@ def test_reward_potentiates_and_punishment_depresses_in_both():
         assert counts[-5:, 1].sum() > counts[-5:, 0].sum()
 
 
+@pytest.mark.slow
 def test_bench_smoke_rows_and_ratios(tmp_path):
     """The bench's run at batch 1, 2 steps: the share and the ratios come from the timings it wrote."""
     from robots.snake import bench_rstdp

@@ -63,6 +63,26 @@ def test_reproduce_refuses_bad_flags_in_one_line(tmp_path, flag, value, words):
     assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
+    weights = tmp_path / "run" / "weights"
+    weights.mkdir(parents=True)
+    (weights / "basic.npz").write_bytes(b"")  # the track is read before any weights
+    track = tmp_path / "track.csv"
+    track.write_text("x,y\n0,0\n")
+    r = _spikejax(
+        "evaluate",
+        "snake-rstdp",
+        "--weights",
+        str(tmp_path / "run"),
+        "--track",
+        str(track),
+        "--out",
+        str(tmp_path / "ev"),
+    )
+    assert r.returncode == 2 and "at least two" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
 def test_reproduce_and_evaluate_small(tmp_path):
     out = tmp_path / "run"
     args = ["--out", str(out), "--seeds", "2", "--train-laps", "0.01", "--topologies", "basic", "--test-steps", "50"]
