@@ -33,26 +33,25 @@ Example:
 from __future__ import annotations
 
 import contextlib
-import itertools
 import operator
 import os
 import zipfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any, BinaryIO, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from spikejax.errors import UserError
+from spikejax.files import atomic_file
 
 __all__ = ["CHECKPOINT", "Controller", "LoopState", "loop_init", "rollout", "run_chunked"]
 
 CHECKPOINT = "checkpoint.npz"
 _FORMAT = 1
 _LOCK = ".checkpoint.lock"
-_temporary_names = itertools.count()
 
 
 class Controller(NamedTuple):
@@ -276,31 +275,6 @@ def _from_host(data: np.ndarray, impl: str) -> jax.Array:
 
 
 @contextlib.contextmanager
-def _atomic_file(path: Path) -> Iterator[BinaryIO]:
-    """Write ``path`` whole or not at all: temporary file, fsync, rename."""
-    temporary = path.parent / f".{path.name}.{os.getpid()}.{next(_temporary_names)}.tmp"
-    try:
-        with open(temporary, "xb") as file:
-            yield file
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(temporary, path)
-    except BaseException as err:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
-        if isinstance(err, OSError):
-            raise UserError(f"cannot write {path}: {err.strerror or err}") from None
-        raise
-    # The rename is durable only once the directory entry is; not every OS can open one.
-    with contextlib.suppress(OSError, AttributeError):
-        fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
-@contextlib.contextmanager
 def _locked(directory: Path) -> Iterator[None]:
     try:
         import fcntl
@@ -372,7 +346,7 @@ def _save(path: Path, fingerprint: str, done: int, total: int, chunk_steps: int,
     for i, (data, impl) in enumerate(zip(chunks.joined(), chunks.impls)):
         arrays[f"records_{i}"] = data
         arrays[f"records_{i}_impl"] = np.asarray(impl)
-    with _atomic_file(path) as file:
+    with atomic_file(path) as file:
         np.savez(file, **arrays)
 
 

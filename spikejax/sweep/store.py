@@ -52,11 +52,9 @@ from __future__ import annotations
 import contextlib
 import csv
 import datetime
-import errno
 import hashlib
 import importlib.metadata
 import io
-import itertools
 import json
 import math
 import os
@@ -67,12 +65,13 @@ import sys
 import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any, BinaryIO, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
 
 from spikejax.errors import UserError
+from spikejax.files import atomic_file
 from spikejax.sweep.spec import SweepSpec
 from spikejax.sweep.table import NONFINITE, Column, bad_cell, parse_column
 
@@ -94,48 +93,17 @@ _PARTS = "parts"
 _LOCK = ".lock"
 _PART_NAME = re.compile(r"rows-(\d+)-(\d+)(?:-([0-9a-f]{64}))?\.csv")
 _DAMAGED = ".damaged"
-_NO_SPACE = (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
 # The fewest bytes a result cell of each kind takes ("true", "0", "0.0"), for the size estimate.
 _LEAST_CELL_BYTES = {"bool": 4, "int": 1, "float": 3}
 _METADATA_FORMAT = 1
 _PUBLISH_SHARE = 0.1
 
 
-_temporary_names = itertools.count()
-
-
-@contextlib.contextmanager
-def _atomic_file(path: Path) -> Iterator[BinaryIO]:
-    """Write ``path`` whole or not at all: temporary file, fsync, rename."""
-    temporary = path.parent / f".{path.name}.{os.getpid()}.{next(_temporary_names)}.tmp"
-    try:
-        with open(temporary, "xb") as file:
-            yield file
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(temporary, path)
-    except BaseException as err:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
-        if isinstance(err, OSError) and err.errno in _NO_SPACE:
-            raise UserError(
-                f"no space left on the disk of {path.parent} (writing {path.name}): the results written so far "
-                "are whole; free some space and run the sweep again to resume"
-            ) from None
-        if isinstance(err, OSError) and not isinstance(err, UserError):
-            raise UserError(f"cannot write {path}: {err.strerror or err}") from None
-        raise
-    _fsync_directory(path.parent)
-
-
-def _fsync_directory(directory: Path) -> None:
-    # The rename is durable only once the directory entry is; not every OS can open one.
-    with contextlib.suppress(OSError, AttributeError):
-        fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+def _atomic_file(path: Path):
+    """`spikejax.files.atomic_file`, with what to do when the disk fills mid-sweep."""
+    return atomic_file(
+        path, when_full="the results written so far are whole; free some space and run the sweep again to resume"
+    )
 
 
 def _remove_temporaries(*directories: Path) -> None:
