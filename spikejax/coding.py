@@ -7,6 +7,7 @@ last (``*, key``).
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, NamedTuple
 
 import jax
@@ -31,6 +32,9 @@ __all__ = [
     "grid_counts",
     "grid_rates",
     "poisson_counts",
+    "PoissonCDF",
+    "poisson_cdf",
+    "poisson_cdf_counts",
     "poisson_count_train",
     "poisson_spikes",
     "poisson_train",
@@ -323,9 +327,30 @@ def poisson_count_train(rates: jax.Array, dt, n_steps: int, *, key: jax.Array, m
         >>> n.shape, int(n[:, 0].sum()), 1900 < int(n[:, 1].sum()) < 2100
         ((4000, 2), 0, True)
     """
-    from spikejax.random import hash_seed, hash_uniform
-
     n_steps = _static_int("n_steps", n_steps, 1)
+    gen = poisson_cdf(rates, dt, key=key, max_count=max_count)
+    return jax.vmap(lambda i: poisson_cdf_counts(gen, i))(jnp.arange(n_steps, dtype=jnp.uint32))
+
+
+class PoissonCDF(NamedTuple):
+    """Generators of constant rates as `poisson_count_train` draws them, one step at a time.
+
+    ``cdf``: ``P(N <= k)`` per generator, shape ``(*rates.shape, max_count)``;
+    ``seed``: the counter hash's two words. ``poisson_cdf_counts(gen, i)`` is
+    row ``i`` of `poisson_count_train`'s result, computed where it is used: a
+    neural loop that draws its input inside its step never holds the whole
+    ``(n_steps, ...)`` array (in the snake's batched closed loop that array and
+    its per-step slices cost more than the draws).
+    """
+
+    cdf: jax.Array
+    seed: jax.Array
+
+
+def poisson_cdf(rates: jax.Array, dt, *, key: jax.Array, max_count: int = 16) -> PoissonCDF:
+    """The `PoissonCDF` of ``rates`` (Hz, any shape; negative as 0) over steps of ``dt`` s; ``key`` used once."""
+    from spikejax.random import hash_seed
+
     max_count = _static_int("max_count", max_count, 1)
     rates = jnp.asarray(rates)
     dtype = rates.dtype if jnp.issubdtype(rates.dtype, jnp.floating) else jnp.float32
@@ -333,10 +358,18 @@ def poisson_count_train(rates: jax.Array, dt, n_steps: int, *, key: jax.Array, m
     k = jnp.arange(1, max_count, dtype=dtype)
     # p_k = e^-lam lam^k / k!, as a running product; cdf[..., j] = P(N <= j)
     terms = jnp.concatenate([jnp.ones(lam.shape + (1,), dtype), jnp.cumprod(lam[..., None] / k, axis=-1)], axis=-1)
-    cdf = jnp.exp(-lam)[..., None] * jnp.cumsum(terms, axis=-1)
-    counter = jnp.arange(n_steps * max(1, lam.size), dtype=jnp.uint32).reshape((n_steps,) + lam.shape)
-    u = hash_uniform(hash_seed(key=key), counter).astype(dtype)
-    return jnp.sum(u[..., None] >= cdf, axis=-1, dtype=jnp.int32)
+    return PoissonCDF(cdf=jnp.exp(-lam)[..., None] * jnp.cumsum(terms, axis=-1), seed=hash_seed(key=key))
+
+
+def poisson_cdf_counts(gen: PoissonCDF, step) -> jax.Array:
+    """The counts (int32, the rates' shape) of step ``step`` (an int, may be traced) of `poisson_cdf`'s generators."""
+    from spikejax.random import hash_uniform
+
+    shape = gen.cdf.shape[:-1]
+    size = max(1, math.prod(shape))
+    counter = jnp.asarray(step, jnp.uint32) * jnp.uint32(size) + jnp.arange(size, dtype=jnp.uint32).reshape(shape)
+    u = hash_uniform(gen.seed, counter).astype(gen.cdf.dtype)
+    return jnp.sum(u[..., None] >= gen.cdf, axis=-1, dtype=jnp.int32)
 
 
 def _static_int(name, value, minimum):
@@ -431,8 +464,13 @@ def grid_counts(
         d = jnp.log(frame + eps) - jnp.log(prev_frame + eps)
     else:
         d = frame - prev_frame
+    events = jnp.abs(d) >= threshold
+    (h, w), (dh, dw) = events.shape, (-(row1 - row0) % rows, -(col1 - col0) % cols)
+    if dh == 0 and dw == 0:
+        # equal cells: a reshape and a sum fuse with the comparison (under vmap, batched small products did not)
+        return events.reshape(rows, h // rows, cols, w // cols).sum(axis=(1, 3), dtype=jnp.int32).reshape(rows * cols)
     # float32 products of 0/1 matrices are exact up to 2**24 events a cell, and run on the BLAS path
-    events = (jnp.abs(d) >= threshold).astype(jnp.float32)
+    events = events.astype(jnp.float32)
     by_row = jnp.asarray(_cell_one_hot(row1 - row0, rows), jnp.float32)
     by_col = jnp.asarray(_cell_one_hot(col1 - col0, cols), jnp.float32)
     return (by_row.T @ events @ by_col).astype(jnp.int32).reshape(rows * cols)

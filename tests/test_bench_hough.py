@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from skimage.transform import hough_line
 
 from spikejax.commands import bench_hough
@@ -64,6 +65,7 @@ def test_modes_agree_on_sparse_slots_and_differ_on_dense_ones():
     assert dense["sync_spikes"] != dense["async_spikes"]
 
 
+@pytest.mark.slow  # ~40 s: the whole bench over two devices; the split's equality is in tests/test_devices.py
 def test_bench_splits_the_streams_over_two_cpu_devices(tmp_path):
     """``--cpu-devices 2``: each spikejax row from batch 2 on is run again over both devices."""
     run = subprocess.run(

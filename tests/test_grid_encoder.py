@@ -197,3 +197,17 @@ def test_grid_rates_follow_the_dtype():
         f = grid_rates(jnp.array([3], jnp.int32), jnp.float64(0.02))
         assert f.dtype == jnp.float64 and float(f[0]) == 3 / 0.02
     assert grid_rates(jnp.array([3]), 0.02).dtype == jnp.float32
+
+
+@pytest.mark.parametrize("roi, rows, cols", [((16, 80, 4, 124), 2, 5), ((0, 128, 0, 140), 4, 7), (ROI, 3, 5)])
+def test_equal_cells_and_unequal_cells_both_match_the_reference_under_vmap(roi, rows, cols):
+    """ROIs that split into equal cells take a reshape-and-sum path, the others one-hot products: both are exact."""
+    frames = [_frames(seed) for seed in range(3)]
+    prev = jnp.stack([p for p, _ in frames])
+    frame = jnp.stack([f for _, f in frames])
+    counts = jax.jit(jax.vmap(lambda p, f: grid_counts(p, f, threshold=0.1, roi=roi, rows=rows, cols=cols)))(
+        prev, frame
+    )
+    assert counts.dtype == jnp.int32
+    for i, (p, f) in enumerate(frames):
+        np.testing.assert_array_equal(counts[i], _reference(p, f, 0.1, roi, rows, cols))

@@ -220,6 +220,7 @@ print([(r["impl"], r["batch"], r["devices"], r["x_brian2"], r["x_brian2_all_core
 """
 
 
+@pytest.mark.slow  # ~70 s: two fresh processes; device equality of flights is also in tests/test_devices.py
 def test_two_cpu_devices_fly_the_same_flights_and_brian2_runs_on_both_cores(tmp_path):
     """Flights split over 2 CPU devices equal those on one; the table adds Brian2 on both cores and split rows."""
     import ast

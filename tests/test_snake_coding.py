@@ -156,6 +156,18 @@ def test_poisson_count_train_has_the_poisson_pmf(lam):
     assert abs(counts.mean() - lam) < N_SE * math.sqrt(lam / total)
 
 
+def test_poisson_cdf_draws_the_rows_of_the_train_one_step_at_a_time():
+    from spikejax.coding import poisson_cdf, poisson_cdf_counts, poisson_count_train
+
+    rates, key = jnp.array([[0.0, 300.0, 5e3], [2e4, 1.0, 250.0]]), jax.random.key(3)
+    train = np.asarray(poisson_count_train(rates, 1e-4, 50, key=key))
+    gen = poisson_cdf(rates, 1e-4, key=key)
+    step = jax.jit(poisson_cdf_counts)
+    rows = np.stack([np.asarray(step(gen, i)) for i in range(50)])
+    np.testing.assert_array_equal(rows, train)
+    assert train[:, 1, 0].sum() > 0 and (train[:, 0, 0] == 0).all()
+
+
 def test_poisson_count_train_clips_at_max_count_and_is_silent_at_zero():
     from spikejax.coding import poisson_count_train
 

@@ -377,7 +377,8 @@ def network_run(config: NetworkConfig, params: NetworkParams, state: NetworkStat
     """The network through one control step, given its generators' spikes and its neurons' rewards.
 
     Args:
-        generated: ``(substeps, 16)`` spike counts of the generators in each neural step.
+        generated: ``(substeps, 16)`` spike counts of the generators in each neural step, or the
+            generators as a `spikejax.coding.PoissonCDF` of 16 (the same counts, drawn inside each step).
         r_first: rewards of the first layer's neurons ``(n_first,)``, set as their synapses' ``n``.
         r_body: rewards of ``[B_L, B_R]`` (multi-layer nets; ignored otherwise).
 
@@ -388,8 +389,12 @@ def network_run(config: NetworkConfig, params: NetworkParams, state: NetworkStat
     mask = jnp.asarray(config.hidden_mask, jnp.float32)
     nf = config.n_first
 
-    def substep(carry, gen):
+    drawn = isinstance(generated, coding.PoissonCDF)
+    xs = jnp.arange(config.substeps, dtype=jnp.uint32) if drawn else generated
+
+    def substep(carry, x):
         neurons, to_parrots, to_lifs, w1, w2, p1, p2, spikes_total = carry
+        gen = coding.poisson_cdf_counts(generated, x) if drawn else x
         to_parrots, parrots = delay_step(to_parrots, gen.astype(jnp.float32))  # NEST's parrots re-emit at once
         dvs, joints = parrots[:N_DVS], parrots[N_DVS:]
         arriving = delay_read(to_lifs)  # excitatory only: Wmin = 0
@@ -420,7 +425,7 @@ def network_run(config: NetworkConfig, params: NetworkParams, state: NetworkStat
         set_dopamine(state.plastic_hidden, r_body),
         jnp.zeros((config.n_out,), jnp.float32),
     )
-    (neurons, to_parrots, to_lifs, w1, w2, p1, p2, total), _ = jax.lax.scan(substep, carry, generated)
+    (neurons, to_parrots, to_lifs, w1, w2, p1, p2, total), _ = jax.lax.scan(substep, carry, xs)
     state = state._replace(
         w_first=w1,
         w_hidden=w2,
@@ -453,7 +458,7 @@ def network_step(
     """
     r_first, r_body, r_hidden = network_rewards(config, params, state, obs[0], obs[1])
     rates = network_rates(config, params, frames, obs)
-    generated = coding.poisson_count_train(rates, 0.001 * config.dt, config.substeps, key=key)
+    generated = coding.poisson_cdf(rates, 0.001 * config.dt, key=key)
     state, counts = network_run(config, params, state, generated, r_first, r_body)
     state = network_decode(config, params, state, counts)._replace(r_first=r_first, r_hidden=r_hidden)
     return state, jnp.stack([state.d_body, state.d_head])
