@@ -23,6 +23,7 @@ def test_bench_frames_are_the_peers_frames():
     np.testing.assert_array_equal(ours, hough_line(images[0], grid.skimage_thetas())[0].T)
 
 
+@pytest.mark.slow  # ~14 s: the bench end to end; the equality of its implementations is in tests/test_hough.py
 def test_bench_writes_every_implementation(tmp_path):
     assert bench_hough.run(trials=1, out=str(tmp_path), repeats=1, cpu_devices=1, no_progress=True) == 0
     with open(tmp_path / "hough.csv") as f:

@@ -175,6 +175,7 @@ def test_large_batches_time_shorter_flights():
     assert bench.timed_duration(1024, 2.5, step_budget=1000) == pytest.approx(0.05)  # the floor
 
 
+@pytest.mark.slow  # ~15 s: the bench end to end; its peer checks stay in the fast suite
 def test_main_writes_the_closed_loop_table(tmp_path, capsys):
     assert (
         bench.run(

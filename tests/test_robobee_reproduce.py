@@ -52,6 +52,7 @@ def test_summary_failures():
     assert not bool(r.upright) and not bool(r.reached)
 
 
+@pytest.mark.slow  # ~30 s: the command end to end; its summary is checked by hand in the fast suite
 def test_reproduce_robobee_small(tmp_path):
     out = tmp_path / "rb"
     run = subprocess.run(

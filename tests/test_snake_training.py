@@ -51,6 +51,35 @@ def test_frozen_networks_do_not_change_and_the_trace_covers_every_step():
     np.testing.assert_array_equal(trace.a_head, again.a_head)  # deterministic given the seeds
 
 
+def test_a_short_training_follows_turns_that_untrained_networks_lose():
+    """100 s of training on a zigzag, then frozen on a left-right and a right-left turn, beside the untrained nets.
+
+    An untrained basic net has equal weights on both sides, goes straight and
+    loses the target at the first turn (the reset rule of Sec. III-B) on every
+    seed. After 100 s of R-STDP (Eq. (6)-(9)) some seeds follow both turns;
+    training this short is weak (measured: 5 of 8 seed-turns without a
+    failure, and one seed learns to veer at once), so the test asks for what
+    it measured with a margin, not for the paper's tracking.
+    """
+    config = rstdp.NetworkConfig(topology="basic")
+    params = rstdp.network_params(config)
+    seeds = np.arange(4)
+    zigzag = tracks.from_waypoints([[0, 0], [0.3, 0], [2, 1], [4, -1], [6, 1], [8, -1], [10, 1], [12, -1]])
+    trained = training.train(config, params, seeds, 100 * training.BLOCK, env=training.env_for(zigzag))
+    keys = jax.vmap(lambda s: jax.random.split(jax.random.PRNGKey(s))[0])(np.asarray(seeds, np.uint32))
+    untrained = jax.vmap(lambda k: rstdp.network_init(config, params, key=k))(keys)
+    both = jax.tree.map(lambda a, b: np.concatenate([a, b]), untrained, trained.loop.controller)
+    failures = []
+    for side in (1.0, -1.0):
+        turn = tracks.from_waypoints([[0, 0], [0.2, 0], [2.5, 1.2 * side], [5, 0]])
+        trace = training.test(config, params, both, turn, 1200, seeds=np.concatenate([seeds, seeds]))
+        failures.append(trace.failed.sum(axis=1))
+    failures = np.stack(failures)  # (side, untrained seeds then trained seeds)
+    before, after = failures[:, :4], failures[:, 4:]
+    assert (before >= 1).all()  # untrained: every seed loses every turn
+    assert (after == 0).sum() >= 3 and after.sum() < before.sum()
+
+
 def _spikejax(*args):
     return subprocess.run([sys.executable, "-m", "spikejax.cli", *args], capture_output=True, text=True, timeout=900)
 
