@@ -1,0 +1,136 @@
+"""The snake's R-STDP networks (`robots.snake.rstdp`) out to NIR, from the weights ``spikejax reproduce snake-rstdp`` saves.
+
+The weights file is ``DIR/weights/TOPOLOGY.npz`` (arrays ``topology``,
+``seeds``, ``w_first`` ``(seeds, 10, n_first)``, ``w_hidden`` ``(seeds, 8, 2)``,
+pA). The graph of one seed, every time in ms at NEST's resolution 0.1 ms::
+
+    dvs (10) -> dvs_delay (Delay 1 ms) -> dvs_first (Linear w_first) -> first_delay (Delay 1 ms) -> first (CubaLIF)
+
+and, for the multi-layer nets (``unified``, ``separated``), the body layer::
+
+    first[H_L, H_R] -> hidden_body (Linear w_hidden[:2]) --+
+    joints (6) -> joints_delay (Delay) -> joints_body (Linear w_hidden[2:]) --+-> body_delay (Delay 1 ms) -> body (CubaLIF)
+
+* the inputs are the Poisson generators' spike counts of each 0.1 ms step; the
+  parrot neurons that repeat them (Sec. II-B) are the identity and have no node:
+  the first ``Delay`` is the generator-to-parrot connection;
+* every LIF is NEST's ``iaf_psc_alpha`` as NIR's ``CubaLIF``, the closest node
+  (`spikejax.nir.iaf_psc_alpha_node`: exponential synapse of the alpha
+  synapse's charge; the exact NEST parameters in the metadata);
+* every connection has the network's 1 ms delay (`robots.snake.rstdp.NetworkConfig.delay`);
+* the separated net's missing synapses are zeros of ``w_hidden``;
+* the R-STDP rule and the decoding of Eq. (4)-(5) stay out of the graph: it is
+  the network as trained, frozen.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from robots.snake import rstdp
+from spikejax import nir as spikejax_nir
+from spikejax.errors import UserError
+
+__all__ = ["load", "network_graph", "export", "exporter"]
+
+
+def load(path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """``(topology, seeds, w_first, w_hidden)`` of a weights file; a one-line error if it is not one."""
+    try:
+        with np.load(path) as z:
+            out = str(z["topology"]), z["seeds"], z["w_first"], z["w_hidden"]
+    except (OSError, KeyError, ValueError) as e:
+        raise UserError(f"{path}: not a snake-rstdp weights file ({e.__class__.__name__})") from None
+    if out[0].partition("/")[0] not in rstdp.TOPOLOGIES:
+        raise UserError(f"{path}: unknown topology {out[0]!r}")
+    return out
+
+
+def network_graph(topology: str, w_first, w_hidden, *, prefix: str = "", config: rstdp.NetworkConfig | None = None):
+    """The nodes and edges of one network; ``topology`` may carry a ``/VARIANT`` (variants change only the learning).
+
+    Returns:
+        ``(nodes, edges, inputs, outputs)`` for `spikejax.nir.graph`.
+    """
+    config = config or rstdp.NetworkConfig(topology=topology.partition("/")[0])
+    neuron = rstdp.network_params(config).neuron
+    dt, d, x = config.dt, config.delay, prefix
+    w_first = np.asarray(w_first, np.float32)
+    nf = config.n_first
+    if w_first.shape != (rstdp.N_DVS, nf):
+        raise UserError(f"w_first of shape {w_first.shape}; the {config.topology} net has {(rstdp.N_DVS, nf)}")
+    nodes = {
+        f"{x}dvs_delay": spikejax_nir.delay_node(rstdp.N_DVS, d, dt),
+        f"{x}dvs_first": spikejax_nir.linear_node(w_first),
+        f"{x}first_delay": spikejax_nir.delay_node(nf, d, dt),
+        f"{x}first": spikejax_nir.iaf_psc_alpha_node(neuron, nf, dt),
+    }
+    edges = [
+        (f"{x}dvs", f"{x}dvs_delay"),
+        (f"{x}dvs_delay", f"{x}dvs_first"),
+        (f"{x}dvs_first", f"{x}first_delay"),
+        (f"{x}first_delay", f"{x}first"),
+    ]
+    inputs = {f"{x}dvs": rstdp.N_DVS}
+    outputs = {f"{x}first_spikes": f"{x}first"}
+    if config.hidden:
+        w_hidden = np.asarray(w_hidden, np.float32) * config.hidden_mask
+        nodes.update(
+            {
+                f"{x}joints_delay": spikejax_nir.delay_node(rstdp.N_JOINT, d, dt),
+                f"{x}hidden_body": spikejax_nir.linear_node(w_hidden[:2]),
+                f"{x}joints_body": spikejax_nir.linear_node(w_hidden[2:]),
+                f"{x}body_delay": spikejax_nir.delay_node(2, d, dt),
+                f"{x}body": spikejax_nir.iaf_psc_alpha_node(neuron, 2, dt),
+            }
+        )
+        edges += [
+            (f"{x}first", f"{x}hidden_body"),
+            (f"{x}joints", f"{x}joints_delay"),
+            (f"{x}joints_delay", f"{x}joints_body"),
+            (f"{x}hidden_body", f"{x}body_delay"),
+            (f"{x}joints_body", f"{x}body_delay"),
+            (f"{x}body_delay", f"{x}body"),
+        ]
+        inputs[f"{x}joints"] = rstdp.N_JOINT
+        outputs[f"{x}body_spikes"] = f"{x}body"
+    return nodes, edges, inputs, outputs
+
+
+def export(path, seed=None):
+    """The NIR graph of a weights file: one seed (a seed number in the file) or all (names ``seed<S>.<node>``)."""
+    topology, seeds, w_first, w_hidden = load(path)
+    seeds = [int(s) for s in seeds]
+    if seed is not None and int(seed) not in seeds:
+        raise UserError(f"{path}: no seed {seed} (it has {', '.join(map(str, seeds))})")
+    chosen = seeds if seed is None else [int(seed)]
+    nodes, edges, inputs, outputs = {}, [], {}, {}
+    for s in chosen:
+        i = seeds.index(s)
+        n, e, ins, outs = network_graph(topology, w_first[i], w_hidden[i], prefix="" if seed is not None else f"seed{s}.")
+        nodes.update(n)
+        edges += e
+        inputs.update(ins)
+        outputs.update(outs)
+    config = rstdp.NetworkConfig(topology=topology.partition("/")[0])
+    meta = {
+        "robot": "snake",
+        "network": f"snake R-STDP {topology} network (Sec. II-III of the snake R-STDP paper), frozen",
+        "topology": topology,
+        "seeds": np.asarray(chosen),
+        "dt": float(config.dt),
+        "time_unit": "ms",
+        "spikes": "generator spike counts per step of dt, held for the step; weights in pA",
+        "source": Path(path).name,
+    }
+    return spikejax_nir.graph(nodes, edges, inputs=inputs, outputs=outputs, metadata=meta)
+
+
+exporter = spikejax_nir.NIRExporter(
+    name="snake-rstdp",
+    recognises=lambda keys, z: {"topology", "w_first", "w_hidden"} <= set(keys),
+    export=export,
+    seeds=lambda path: [int(s) for s in load(path)[1]],
+)
