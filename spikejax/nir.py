@@ -110,7 +110,8 @@ class NIRExporter:
 
     Attributes:
         name: the robot (``--robot NAME`` picks it by this name).
-        recognises: ``(keys of an .npz) -> bool``, whether a weights file is this robot's.
+        recognises: ``(keys, npz) -> bool``: whether an opened ``.npz`` (its keys and
+            the ``numpy`` archive) is this robot's weights file.
         export: ``(path, seed) -> nir.NIRGraph``; ``seed=None`` exports every seed of the file.
         seeds: ``(path) -> seeds in the file``.
     """
@@ -377,7 +378,9 @@ def relative_potentials(g):
     nodes = dict(g.nodes)
     for name, node in g.nodes.items():
         if isinstance(node, (nir.LIF, nir.CubaLIF)):
-            fields = {f.name: getattr(node, f.name) for f in dataclasses.fields(node) if f.init and f.name != "metadata"}
+            fields = {
+                f.name: getattr(node, f.name) for f in dataclasses.fields(node) if f.init and f.name != "metadata"
+            }
             leak = node.v_leak.astype(np.float32)
             fields.update(v_leak=np.zeros_like(leak), v_threshold=node.v_threshold - leak, v_reset=node.v_reset - leak)
             nodes[name] = type(node)(**fields, metadata=_generic(node.metadata))
@@ -590,9 +593,7 @@ def _import_node(nir, name, node, dt):
             dt=jnp.float32(dt),
         )
         return "cuba_lif", n, p, 0
-    raise bad(
-        "not supported; spikejax imports Input, Output, Affine, Linear, Scale, Delay, LIF, CubaLIF and IF nodes"
-    )
+    raise bad("not supported; spikejax imports Input, Output, Affine, Linear, Scale, Delay, LIF, CubaLIF and IF nodes")
 
 
 def from_nir(g, *, dt: float | None = None) -> tuple[Network, dict]:
@@ -668,7 +669,9 @@ def from_nir(g, *, dt: float | None = None) -> tuple[Network, dict]:
             if info[a][1] != size and kind not in ("affine", "linear"):
                 raise UserError(f"NIR node {name!r}: input from {a!r} has size {info[a][1]}, the node {size}")
             if kind in ("affine", "linear") and info[a][1] != info[name][2][0].shape[0]:
-                raise UserError(f"NIR node {name!r}: input from {a!r} has size {info[a][1]}, weight expects {info[name][2][0].shape[0]}")
+                raise UserError(
+                    f"NIR node {name!r}: input from {a!r} has size {info[a][1]}, weight expects {info[name][2][0].shape[0]}"
+                )
         if kind == "input" and pre:
             raise UserError(f"NIR node {name!r}: an Input has incoming edges")
         if kind != "input" and not pre:

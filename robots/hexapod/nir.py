@@ -98,7 +98,9 @@ def export(path, seed=None):
     nodes, edges, inputs, outputs = {}, [], {}, {}
     for s in chosen:
         i = seeds.index(s)
-        n, e, ins, outs = cpg_graph(arrays["w_in"][i], arrays["w_cpg"][i], neuron, prefix="" if seed is not None else f"seed{s}.")
+        n, e, ins, outs = cpg_graph(
+            arrays["w_in"][i], arrays["w_cpg"][i], neuron, prefix="" if seed is not None else f"seed{s}."
+        )
         nodes.update(n)
         edges += e
         inputs.update(ins)

@@ -41,9 +41,7 @@ _PARAMS = ("dt", "a", "b", "input_gain", "tau_input", "tau_hidden", "tau_output"
 _DECODER = ("alpha", "beta", "gamma")
 
 
-def save_controller(
-    path, config: ControllerConfig, params: ControllerParams, states: ControllerState, seeds
-) -> Path:
+def save_controller(path, config: ControllerConfig, params: ControllerParams, states: ControllerState, seeds) -> Path:
     """Writes a batch of trained controllers (leading axis: one per seed) to an ``.npz``, atomically.
 
     The weights are stored dense (0 where no synapse) with their masks, as the
@@ -135,7 +133,9 @@ def controller_graph(arrays: dict, index: int = 0, *, encoder: bool = True, pref
     ]
     if encoder:
         w, bias = _encoder(n_per, p["a"], p["b"], p["input_gain"])
-        nodes[f"{x}encoder"] = spikejax_nir.linear_node(w, bias, metadata={"what": "q_hat = a (q + b), antagonist halves, x input_gain"})
+        nodes[f"{x}encoder"] = spikejax_nir.linear_node(
+            w, bias, metadata={"what": "q_hat = a (q + b), antagonist halves, x input_gain"}
+        )
         edges = [(f"{x}q", f"{x}encoder"), (f"{x}encoder", f"{x}input")] + edges
         inputs = {f"{x}q": N_LATERAL}
     else:

@@ -109,7 +109,9 @@ def export(path, seed=None):
     nodes, edges, inputs, outputs = {}, [], {}, {}
     for s in chosen:
         i = seeds.index(s)
-        n, e, ins, outs = network_graph(topology, w_first[i], w_hidden[i], prefix="" if seed is not None else f"seed{s}.")
+        n, e, ins, outs = network_graph(
+            topology, w_first[i], w_hidden[i], prefix="" if seed is not None else f"seed{s}."
+        )
         nodes.update(n)
         edges += e
         inputs.update(ins)

@@ -66,9 +66,7 @@ def run(*, weights: str, out: str, robot: str | None, seed: int | None) -> int:
     tmp = out_path.with_name(out_path.name + ".tmp")
     nir.write(tmp, graph)
     tmp.replace(out_path)
-    neurons = sum(
-        int(node.v_threshold.size) for node in graph.nodes.values() if hasattr(node, "v_threshold")
-    )
+    neurons = sum(int(node.v_threshold.size) for node in graph.nodes.values() if hasattr(node, "v_threshold"))
     seeds = graph.metadata.get(nir.KEY, {}).get("seeds", [])
     print(
         f"wrote {out_path}: {exporter.name}, seeds {', '.join(str(int(s)) for s in seeds)}, "
