@@ -1,4 +1,4 @@
-"""The RoboBee's 200-100-50 controller in and out of NIR, with its learned weights.
+"""The RoboBee's 200-100-50 controller (Section III of the RoboBee paper) out to NIR, with its learned weights.
 
 A trained controller (`robots.robobee.controller`) is saved with
 `save_controller` (one file, every seed of a batch) and exported with

@@ -19,8 +19,8 @@ and, for the multi-layer nets (``unified``, ``separated``), the body layer::
   synapse's charge; the exact NEST parameters in the metadata);
 * every connection has the network's 1 ms delay (`robots.snake.rstdp.NetworkConfig.delay`);
 * the separated net's missing synapses are zeros of ``w_hidden``;
-* the R-STDP rule and the decoding of Eq. (4)-(5) stay out of the graph: it is
-  the network as trained, frozen.
+* the R-STDP rule and the decoding of Eq. (4)-(5) of the snake R-STDP paper stay
+  out of the graph: it is the network as trained, frozen.
 """
 
 from __future__ import annotations
