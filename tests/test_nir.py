@@ -76,19 +76,19 @@ def robobee(tmp_path_factory):
         )
 
         def frozen(s, q):
-            s, _ = controller_step(config, params, s, q, jnp.float32(0.0), False)
+            s, y_hat = controller_step(config, params, s, q, jnp.float32(0.0), False)
             # A neuron spiked in this step iff its refractory counter was just set to n_ref - 1.
             fired = lambda layer: layer.refractory == n_ref - 1
-            return s, (fired(s.input), fired(s.hidden), fired(s.output))
+            return s, (fired(s.input), fired(s.hidden), fired(s.output), y_hat)
 
-        spikes = jax.lax.scan(frozen, learned, Q)[1]
+        *spikes, y_hat = jax.lax.scan(frozen, learned, Q)[1]
         states = jax.tree.map(lambda a, b: jnp.stack([a, b]), controller_init(config, params, key=k0), learned)
-        return states, spikes
+        return states, tuple(spikes), y_hat
 
-    states, spikes = make(jax.random.PRNGKey(0))
+    states, spikes, y_hat = make(jax.random.PRNGKey(0))
     path = tmp_path_factory.mktemp("robobee") / "controller.npz"
     robobee_nir.save_controller(path, config, params, states, [0, 1])
-    return path, spikes
+    return path, spikes, y_hat
 
 
 def _run(graph, inputs):
@@ -98,7 +98,7 @@ def _run(graph, inputs):
 
 
 def test_robobee_round_trip_gives_the_same_spikes_bit_for_bit(robobee, tmp_path):
-    path, (s_in, s_h, s_out) = robobee
+    path, (s_in, s_h, s_out), _ = robobee
     graph = spikejax_nir.read(spikejax_nir.write(tmp_path / "bee.nir", robobee_nir.export(path, seed=1)))
     assert graph.nodes["input"].v_threshold.dtype == np.float32
     assert graph.nodes["input"].metadata["spikejax"]["t_ref"] == pytest.approx(2e-3)
@@ -110,7 +110,7 @@ def test_robobee_round_trip_gives_the_same_spikes_bit_for_bit(robobee, tmp_path)
 
 
 def test_robobee_export_of_all_seeds_holds_each_seeds_weights(robobee):
-    path, _ = robobee
+    path, _, _ = robobee
     graph = robobee_nir.export(path)
     arrays = robobee_nir.load_controller(path)
     assert set(graph.metadata["spikejax"]["seeds"]) == {0, 1}
@@ -118,6 +118,55 @@ def test_robobee_export_of_all_seeds_holds_each_seeds_weights(robobee):
         np.testing.assert_array_equal(graph.nodes[f"seed{seed}.input_hidden"].weight, arrays["w_ih"][i].T)
         np.testing.assert_array_equal(graph.nodes[f"seed{seed}.hidden"].v_threshold, arrays["v_th_hidden"][i])
     assert not np.array_equal(arrays["w_ih"][0], arrays["w_ih"][1])
+
+
+def _steer(controller, q):
+    def step(s, x):
+        return robobee_nir.graph_controller_step(controller, s, x)
+
+    return jax.jit(lambda q: jax.lax.scan(step, robobee_nir.graph_controller_init(controller), q)[1])(q)
+
+
+def test_exported_controller_drives_the_robobee_interface_bit_for_bit(robobee, tmp_path):
+    """The graph as a RoboBee controller (q in, Eq. (8)'s y_hat out) equals the frozen controller's y_hat."""
+    path, _, y_hat = robobee
+    controller = robobee_nir.graph_controller(
+        spikejax_nir.write(tmp_path / "bee.nir", robobee_nir.export(path, seed=1))
+    )
+    np.testing.assert_array_equal(_steer(controller, Q), y_hat)
+    assert float(jnp.std(y_hat)) > 0.05
+
+
+def test_a_foreign_graph_drives_the_robobee_interface():
+    """A 4-20-10 graph written with NIR's own classes as snnTorch writes LIFs (``R = tau / dt``, no spikejax metadata)."""
+    rng = np.random.default_rng(0)
+    dt, tau = 1e-4, np.float32(5e-3)
+
+    def lif(n):
+        return nir.LIF(
+            tau=np.full(n, tau), r=np.full(n, tau / dt), v_leak=np.zeros(n), v_threshold=np.ones(n), v_reset=np.zeros(n)
+        )
+
+    nodes = {
+        "input": nir.Input(np.array([4])),
+        "fc1": nir.Affine(weight=rng.normal(0, 0.01, (20, 4)).astype(np.float32), bias=np.full(20, 0.02, np.float32)),
+        "lif1": lif(20),
+        "fc2": nir.Linear(weight=rng.uniform(0, 0.2, (10, 20)).astype(np.float32)),
+        "lif2": lif(10),
+        "output": nir.Output(np.array([10])),
+    }
+    chain = list(nodes)
+    graph = nir.NIRGraph(nodes=nodes, edges=list(zip(chain, chain[1:])), metadata={})
+    with pytest.raises(UserError, match="decoder"):
+        robobee_nir.graph_controller(graph, dt=dt)
+    decoder = coding.DecoderParams(alpha=jnp.float32(0.04), beta=jnp.float32(100.0), gamma=jnp.float32(0.0))
+    controller = robobee_nir.graph_controller(graph, dt=dt, decoder=decoder)
+    y_hat = np.asarray(_steer(controller, Q[:3000]))
+    assert np.all(np.isfinite(y_hat)) and y_hat.max() > 0.1
+    with pytest.raises(UserError, match="one input of size 4"):
+        wide = {"x": nir.Input(np.array([3])), "w": nir.Linear(weight=np.ones((2, 3), np.float32))}
+        wide["y"] = nir.Output(np.array([2]))
+        robobee_nir.graph_controller(nir.NIRGraph(nodes=wide, edges=[("x", "w"), ("w", "y")], metadata={}), dt=dt)
 
 
 def _snake_file(tmp_path, topology, scale=1.0):
@@ -262,7 +311,7 @@ def test_unsupported_and_bad_graphs_give_one_line_errors_naming_the_node(tmp_pat
 
 def test_unit_thresholds_keeps_the_spikes(robobee):
     """Moving each threshold into the incoming weights (what snnTorch needs) changes nothing but rounding."""
-    path, _ = robobee
+    path, _, _ = robobee
     graph = robobee_nir.export(path, seed=0)
     generic = spikejax_nir.relative_potentials(graph)  # NIR's reading, spikejax's metadata dropped
     unit = spikejax_nir.unit_thresholds(graph)
@@ -292,7 +341,7 @@ def test_command_flags_are_its_run_arguments():
 
 
 def test_command_writes_readable_graphs_of_every_robot(registered, robobee, tmp_path, capsys):
-    bee, _ = robobee
+    bee, _, _ = robobee
     snake, _, _ = _snake_file(tmp_path, "unified")
     neuron = DiscreteLIFParams(alpha=jnp.float32(2.0), v_th=jnp.float32(1.0))
     cpg = hexapod_nir.save_weights(
@@ -313,7 +362,7 @@ def test_command_writes_readable_graphs_of_every_robot(registered, robobee, tmp_
 
 
 def test_command_errors_are_one_line(registered, robobee, tmp_path):
-    bee, _ = robobee
+    bee, _, _ = robobee
     with pytest.raises(UserError) as e:
         export_nir.run(weights=str(bee), out=str(tmp_path / "g.nir"), robot=None, seed=9)
     _one_line(e, "no seed 9", "0, 1")
@@ -378,7 +427,7 @@ def test_robobee_controller_in_snntorch_counts_the_same_spikes(robobee):
     is lost to snnTorch, whose input, hidden and output neurons then fire about
     2.3, 4 and 6 times as often as the controller does (asserted below).
     """
-    path, (s_in, s_h, s_out) = robobee
+    path, (s_in, s_h, s_out), _ = robobee
     graph = spikejax_nir.unit_thresholds(robobee_nir.export(path, seed=1))
     theirs = _torch_counts(_snntorch(graph), ("input", "hidden", "output"), Q)
     ours = _run(graph, {"q": Q})

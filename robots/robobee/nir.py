@@ -1,4 +1,4 @@
-"""The RoboBee's 200-100-50 controller (Section III of the RoboBee paper) out to NIR, with its learned weights.
+"""The RoboBee's 200-100-50 controller (Section III of the RoboBee paper) in and out of NIR, with its learned weights.
 
 A trained controller (`robots.robobee.controller`) is saved with
 `save_controller` (one file, every seed of a batch) and exported with
@@ -21,21 +21,39 @@ graph, per seed::
   node); its constants are in the graph's metadata.
 
 Times are in seconds and ``dt`` is the controller's 0.1 ms.
+
+In: `graph_controller` turns a NIR graph of that shape (4 inputs, the lateral
+state; one spiking output population), exported by spikejax or by another tool
+(snnTorch, Norse, ...), into a controller with the RoboBee controller's
+interface: ``q_lateral -> y_hat``, the output spikes decoded by Eq. (8).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from robots.robobee.controller import N_LATERAL, ControllerConfig, ControllerParams, ControllerState
 from spikejax import nir as spikejax_nir
+from spikejax.coding import DecoderParams, DecoderState, decoder_init, decoder_step
 from spikejax.errors import UserError
 from spikejax.neurons import lif_params
 
-__all__ = ["save_controller", "load_controller", "controller_graph", "export", "exporter"]
+__all__ = [
+    "save_controller",
+    "load_controller",
+    "controller_graph",
+    "export",
+    "exporter",
+    "GraphController",
+    "graph_controller",
+    "graph_controller_init",
+    "graph_controller_step",
+]
 
 _PARAMS = ("dt", "a", "b", "input_gain", "tau_input", "tau_hidden", "tau_output", "t_ref", "syn_hidden", "syn_output")
 _DECODER = ("alpha", "beta", "gamma")
@@ -182,3 +200,74 @@ exporter = spikejax_nir.NIRExporter(
     export=export,
     seeds=lambda path: [int(s) for s in load_controller(path)["seeds"]],
 )
+
+
+class GraphController(NamedTuple):
+    """An imported network as a RoboBee lateral controller (`graph_controller`).
+
+    Attributes:
+        network: the graph's static structure (`spikejax.nir.Network`); keep it
+            static under ``jit`` (a closure or ``static_argnames``).
+        params: its nodes' parameters (traced).
+        decoder: Eq. (8)'s ``alpha``, ``beta``, ``gamma``.
+        dt: the step, s.
+    """
+
+    network: spikejax_nir.Network
+    params: dict
+    decoder: DecoderParams
+    dt: float
+
+
+def graph_controller(graph, *, decoder: DecoderParams | None = None, dt: float | None = None) -> GraphController:
+    """A NIR graph with one 4-wide input (the lateral state) and one spiking output as a RoboBee controller.
+
+    Args:
+        graph: the ``nir.NIRGraph`` or a path to one.
+        decoder: Eq. (8)'s constants; default the graph's metadata (a spikejax export), else required.
+        dt: the step, s; default the graph's ``metadata["spikejax"]["dt"]``.
+
+    Raises:
+        UserError: in one line, if the graph has not one input of size 4 and one
+            output, or states no decoder and none is given.
+    """
+    if isinstance(graph, (str, Path)):
+        graph = spikejax_nir.read(graph)
+    network, params = spikejax_nir.from_nir(graph, dt=dt)
+    if len(network.inputs) != 1 or network.size(network.inputs[0]) != N_LATERAL:
+        sizes = ", ".join(f"{n} ({network.size(n)})" for n in network.inputs) or "none"
+        raise UserError(
+            f"a RoboBee controller graph takes one input of size {N_LATERAL}, the lateral state; this one: {sizes}"
+        )
+    if len(network.outputs) != 1:
+        raise UserError(
+            f"a RoboBee controller graph has one output, the spikes to decode; this one {len(network.outputs)}"
+        )
+    if decoder is None:
+        meta = graph.metadata.get(spikejax_nir.KEY, {})
+        if not all(f"decoder_{k}" in meta for k in _DECODER):
+            raise UserError(
+                "the graph states no decoder (Eq. (8) of the RoboBee paper): pass decoder=DecoderParams(...)"
+            )
+        decoder = DecoderParams(*(jnp.float32(meta[f"decoder_{k}"]) for k in _DECODER))
+    return GraphController(network=network, params=params, decoder=decoder, dt=network.dt)
+
+
+def graph_controller_init(controller: GraphController) -> tuple[dict, DecoderState]:
+    """The imported network at rest and the decoder's trace at 0."""
+    return spikejax_nir.network_init(controller.network, controller.params), decoder_init()
+
+
+def graph_controller_step(
+    controller: GraphController, state, q_lateral
+) -> tuple[tuple[dict, DecoderState], jnp.ndarray]:
+    """One step: the lateral state ``[theta, theta_dot, x, x_dot]`` in, ``y_hat`` (units of `TORQUE_UNIT`) out.
+
+    The same interface as `robots.robobee.controller.controller_step` without learning:
+    a frozen network, trained in spikejax or elsewhere.
+    """
+    net_state, dec = state
+    net = controller.network
+    net_state, out = spikejax_nir.network_step(net, controller.params, net_state, {net.inputs[0]: q_lateral})
+    dec, y_hat = decoder_step(controller.decoder, dec, out[net.outputs[0]], controller.dt)
+    return (net_state, dec), y_hat
