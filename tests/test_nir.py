@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -184,32 +185,53 @@ def _snake_file(tmp_path, topology, scale=1.0):
 SNAKE_RATES = jnp.array([50, 300, 0, 120, 300, 10, 200, 80, 300, 150, 100, 20, 300, 0, 50, 250], jnp.float32)
 
 
-def test_snake_round_trip_gives_the_same_spike_counts_every_control_step(tmp_path, topology="separated"):
-    """The separated net (both layers, all delays, two inputs); the other topologies are parts of it."""
-    path, w_first, w_hidden = _snake_file(tmp_path, topology)
-    config = rstdp.NetworkConfig(topology=topology, learn=False)
+class _EnvParams(NamedTuple):
+    event_threshold: jax.Array
+
+
+class _EnvState(NamedTuple):
+    obs: jax.Array
+    info: dict
+
+
+def test_snake_round_trip_drives_the_snake_as_the_rstdp_controller_does(tmp_path):
+    """The separated net (both layers, every delay, both inputs) exported, imported and run as the env's controller.
+
+    Over 25 control steps of changing camera frames and joint angles, the
+    imported graph's controller gives the frozen R-STDP controller's spike
+    counts and actions bit for bit (the other topologies are parts of this one).
+    """
+    path, w_first, w_hidden = _snake_file(tmp_path, "separated")
+    config = rstdp.NetworkConfig(topology="separated", learn=False)
     params = rstdp.network_params(config)
-    n_ctrl = 25
-    gen = coding.poisson_count_train(
-        SNAKE_RATES, 0.001 * config.dt, config.substeps * n_ctrl, key=jax.random.PRNGKey(1)
-    )
     net = rstdp.network_init(config, params, key=jax.random.PRNGKey(0))
     net = net._replace(w_first=jnp.asarray(w_first[1]), w_hidden=jnp.asarray(w_hidden[1]))
-    zero_first, zero_body = jnp.zeros(config.n_first), jnp.zeros(2)
+    reference = rstdp.controller(config)
+    imported, imported_params, imported_state = snake_nir.graph_controller(
+        spikejax_nir.write(tmp_path / "snake.nir", snake_nir.export(path, seed=6))
+    )
+    n_ctrl = 25
+    k_frames, k_obs, k_steps = jax.random.split(jax.random.PRNGKey(4), 3)
+    frames = jax.random.uniform(k_frames, (n_ctrl + 1, 128, 128))
+    obs = jax.random.uniform(k_obs, (n_ctrl, 18), minval=-0.3, maxval=0.3)
+    keys = jax.random.split(k_steps, n_ctrl)
 
-    def control(s, g):
-        return rstdp.network_run(config, params, s, g, zero_first, zero_body)
+    def env_state(i):
+        info = {"prev_frame": frames[i], "frame": frames[i + 1], "params": _EnvParams(jnp.float32(0.1))}
+        return _EnvState(obs=obs[i], info=info)
 
-    _, counts = jax.jit(lambda s: jax.lax.scan(control, s, gen.reshape(n_ctrl, config.substeps, -1)))(net)
-    graph = snake_nir.export(path, seed=6)
-    inputs = {"dvs": gen[:, : rstdp.N_DVS]}
-    if config.hidden:
-        inputs["joints"] = gen[:, rstdp.N_DVS :]
-    out = _run(graph, inputs)
-    spikes = out["first"] if not config.hidden else jnp.concatenate([out["first"], out["body"]], axis=1)
-    ours = np.asarray(spikes.reshape(n_ctrl, config.substeps, -1).sum(1), np.int32)
-    np.testing.assert_array_equal(ours, np.asarray(counts))
-    assert counts[-1].min() > 0
+    def both(carry, i):
+        a, b = carry
+        a, action_a, _ = reference.step(params, a, env_state(i), key=keys[i])
+        b, action_b, _ = imported.step(imported_params, b, env_state(i), key=keys[i])
+        return (a, b), (a.counts, b.counts, action_a, action_b)
+
+    _, (counts_a, counts_b, action_a, action_b) = jax.jit(
+        lambda: jax.lax.scan(both, (net, imported_state), jnp.arange(n_ctrl))
+    )()
+    np.testing.assert_array_equal(counts_b, counts_a)
+    np.testing.assert_array_equal(action_b, action_a)
+    assert counts_a[-1].min() > 0 and float(jnp.abs(action_a[-1]).max()) > 0
 
 
 def test_hexapod_round_trip_and_the_nir_lif_reading_give_the_cpg_raster(tmp_path):
@@ -497,3 +519,17 @@ def test_snake_basic_network_in_snntorch_counts_the_same_spikes(tmp_path):
     assert ours.min() > 20
     assert np.all(np.abs(theirs - ours) <= 0.04 * ours + 2), (ours, theirs)
     assert np.all(nest < ours)  # the refractory period NIR cannot carry
+
+
+def test_snake_controller_refuses_a_graph_of_another_shape(tmp_path):
+    neuron = DiscreteLIFParams(alpha=jnp.float32(2.0), v_th=jnp.float32(1.0))
+    cpg = hexapod_nir.save_weights(
+        tmp_path / "cpg.npz", cpg_weights_init(0.0, 1.0, key=jax.random.PRNGKey(0)), neuron, 4
+    )
+    graph = hexapod_nir.export(cpg, seed=4)
+    with pytest.raises(UserError) as e:
+        snake_nir.graph_controller(graph)
+    _one_line(e, "topology")
+    with pytest.raises(UserError) as e:
+        snake_nir.graph_controller(graph, rstdp.NetworkConfig(topology="basic", learn=False))
+    _one_line(e, "dvs (10)", "gait (3)")

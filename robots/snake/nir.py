@@ -21,19 +21,31 @@ and, for the multi-layer nets (``unified``, ``separated``), the body layer::
 * the separated net's missing synapses are zeros of ``w_hidden``;
 * the R-STDP rule and the decoding of Eq. (4)-(5) of the snake R-STDP paper stay
   out of the graph: it is the network as trained, frozen.
+
+In: `graph_controller` runs a graph of that shape (inputs ``dvs`` and, for the
+multi-layer nets, ``joints``; outputs ``first_spikes`` and ``body_spikes``),
+exported by spikejax or written by another tool, as a
+`spikejax.rollout.Controller` of the snake env: the encoders and the decoding
+are the R-STDP controller's (`robots.snake.rstdp.network_rates`,
+`robots.snake.rstdp.network_decode`), the network the graph's, frozen.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from robots.snake import rstdp
+from spikejax import coding
 from spikejax import nir as spikejax_nir
 from spikejax.errors import UserError
+from spikejax.rollout import Controller
 
-__all__ = ["load", "network_graph", "export", "exporter"]
+__all__ = ["load", "network_graph", "export", "exporter", "GraphState", "graph_controller"]
 
 
 def load(path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
@@ -136,3 +148,82 @@ exporter = spikejax_nir.NIRExporter(
     export=export,
     seeds=lambda path: [int(s) for s in load(path)[1]],
 )
+
+
+class GraphState(NamedTuple):
+    """An imported network between control steps, with Eq. (5)'s integrators and the last counts.
+
+    Attributes:
+        network: the imported network's state (`spikejax.nir.network_init`).
+        d_head, d_body: Eq. (5)'s integrators.
+        counts: output spikes of the last control step, ``(n_out,)``.
+    """
+
+    network: dict
+    d_head: jax.Array
+    d_body: jax.Array
+    counts: jax.Array
+
+
+def graph_controller(graph, config: rstdp.NetworkConfig | None = None):
+    """A NIR graph of the snake's network shape as a frozen controller of `robots.snake.env.SnakeEnv`.
+
+    Args:
+        graph: the ``nir.NIRGraph`` or a path; its inputs ``dvs`` (10) and, if
+            the topology has the body layer, ``joints`` (6); its outputs
+            ``first_spikes`` and ``body_spikes``.
+        config: the topology and timing; default the graph's metadata
+            ``topology`` (a spikejax export), learning off.
+
+    Returns:
+        ``(controller, params, state)``: the `spikejax.rollout.Controller`, its
+        parameters (the graph's node parameters and the encoders' and decoder's
+        `robots.snake.rstdp.NetworkParams`) and its initial state.
+
+    Raises:
+        UserError: in one line, if the graph lacks an input or output of that shape.
+    """
+    if isinstance(graph, (str, Path)):
+        graph = spikejax_nir.read(graph)
+    if config is None:
+        topology = graph.metadata.get(spikejax_nir.KEY, {}).get("topology")
+        if topology is None:
+            raise UserError("the graph states no snake topology (metadata spikejax.topology): pass config")
+        config = rstdp.NetworkConfig(topology=str(topology).partition("/")[0], learn=False)
+    net, graph_params = spikejax_nir.from_nir(graph, dt=config.dt)
+    want_in = {"dvs": rstdp.N_DVS, **({"joints": rstdp.N_JOINT} if config.hidden else {})}
+    want_out = {"first_spikes": config.n_first, **({"body_spikes": 2} if config.hidden else {})}
+    for names, want, what in ((net.inputs, want_in, "input"), (net.outputs, want_out, "output")):
+        if {n: net.size(n) for n in names} != want:
+            got = ", ".join(f"{n} ({net.size(n)})" for n in names) or "none"
+            expected = ", ".join(f"{n} ({k})" for n, k in want.items())
+            raise UserError(f"a snake {config.topology} graph has the {what}s {expected}; this one: {got}")
+    params = (graph_params, rstdp.network_params(config))
+
+    def step(params, state, env_state, *, key):
+        graph_params, net_params = params
+        info = env_state.info
+        frames = (info["prev_frame"], info["frame"], info["params"].event_threshold)
+        rates = rstdp.network_rates(config, net_params, frames, env_state.obs)
+        generated = coding.poisson_count_train(rates, 0.001 * config.dt, config.substeps, key=key)
+        inputs = {"dvs": generated[:, : rstdp.N_DVS]}
+        if config.hidden:
+            inputs["joints"] = generated[:, rstdp.N_DVS :]
+        network, out = spikejax_nir.network_run(net, graph_params, state.network, inputs)
+        spikes = [out["first_spikes"]] + ([out["body_spikes"]] if config.hidden else [])
+        counts = jnp.concatenate(spikes, axis=1).sum(0).astype(jnp.int32)
+        state = rstdp.network_decode(config, net_params, state._replace(network=network), counts)
+        return state, jnp.stack([state.d_body, state.d_head]), {"d_body": state.d_body, "d_head": state.d_head}
+
+    def on_reset(params, state):
+        zero = jnp.zeros((), jnp.float32)
+        return state._replace(d_head=zero, d_body=zero)
+
+    zero = jnp.zeros((), jnp.float32)
+    state = GraphState(
+        network=spikejax_nir.network_init(net, graph_params),
+        d_head=zero,
+        d_body=zero,
+        counts=jnp.zeros((config.n_out,), jnp.int32),
+    )
+    return Controller(step=step, on_reset=on_reset), params, state
