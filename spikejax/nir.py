@@ -132,7 +132,7 @@ def lif_node(params: LIFParams, n: int):
     v_rest``; every constant is copied as it is (float32). Two things NIR's LIF
     does not have go into the metadata: the refractory period ``t_ref`` (NIR
     has none: a consumer that ignores it lets a neuron fire again right after its
-    reset, so rates above about ``1 / (4 t_ref)`` come out higher) and the
+    reset, so the higher a neuron's rate, the more it fires there) and the
     threshold test (spikejax fires at ``v >= v_th``, NIR at ``v > v_th``; the two
     differ only when ``v`` lands exactly on the threshold). The noise ``sigma``
     must be 0: NIR has no noise.
@@ -336,7 +336,9 @@ def unit_thresholds(g):
     ``v / v_th`` follows the same equation with input ``I / v_th``, so each
     neuron's threshold can be moved into the rows of the ``Affine`` / ``Linear``
     nodes that feed it. Some consumers need it (snnTorch's import takes one
-    threshold per layer). The spikes are the same up to rounding.
+    threshold per layer). The spikes are the same up to rounding, by NIR's
+    equations: the changed neurons lose spikejax's metadata, so `from_nir`
+    reads them as NIR's nodes (no refractory period, ``v > v_th``).
 
     Raises:
         UserError: naming the node, if a neuron node has ``v_leak`` or
@@ -373,6 +375,8 @@ def relative_potentials(g):
     ``u = v - v_leak`` obeys the same equations with ``v_leak = 0``,
     ``v_threshold - v_leak`` and ``v_reset - v_leak``; a neuron at rest starts at
     ``u = 0``. (NEST's ``iaf_psc_alpha`` in mV becomes 0 at rest, 15 at threshold.)
+    As in `unit_thresholds`, the changed neurons lose spikejax's metadata: the
+    result is NIR's reading of the graph.
     """
     nir = _nir()
     nodes = dict(g.nodes)
