@@ -1,4 +1,4 @@
-"""Plumbing the robots' reproductions share: named sweep files, CSV tables.
+"""Plumbing the robots' reproductions share: named sweep files, CSV tables, saved weights files.
 
 A benchmark's plumbing (isolated runs, timing, tables) is `spikejax.benchmarking`.
 """
@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from spikejax.errors import UserError
+from spikejax.files import atomic_file
 from spikejax.sweep import load_sweep, read_results, run_sweep
 
 # The sweep files of the reproductions, shipped as package data of ``robots``
@@ -55,3 +56,22 @@ def write_csv(path: Path, header: list[str], rows: list[list]) -> None:
         writer.writerow(header)
         writer.writerows(rows)
     tmp.replace(path)
+
+
+def save_weights_file(path, robot: str, **arrays) -> Path:
+    """``arrays`` and the tag ``robot`` as one ``.npz`` file, written whole or not at all; returns the path."""
+    path = Path(path)
+    with atomic_file(path) as file:
+        np.savez(file, robot=robot, **arrays)
+    return path
+
+
+def load_weights_file(path, robot: str, what: str) -> dict:
+    """The arrays of a `save_weights_file` file tagged ``robot``; a one-line error naming ``what`` if it is not one."""
+    try:
+        with np.load(path) as z:
+            if str(z["robot"]) != robot:
+                raise KeyError("robot")
+            return {k: z[k] for k in z.files}
+    except (OSError, KeyError, ValueError) as e:
+        raise UserError(f"{path}: not {what} ({e.__class__.__name__})") from None

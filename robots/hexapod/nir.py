@@ -26,6 +26,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from robots.common import load_weights_file, save_weights_file
 from robots.hexapod.cpg import CPGWeights
 from robots.hexapod.gaits import N_GAITS, N_LEGS
 from spikejax import nir as spikejax_nir
@@ -45,29 +46,20 @@ def save_weights(path, weights: CPGWeights, neuron: DiscreteLIFParams, seeds) ->
         w_in, w_cpg = w_in[None], w_cpg[None]
     if w_in.shape != (seeds.size, N_GAITS, N_LEGS) or w_cpg.shape != (seeds.size, N_LEGS, N_LEGS):
         raise UserError(f"weights of shapes {w_in.shape}, {w_cpg.shape} for {seeds.size} seeds")
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(
-        tmp,
-        robot="hexapod",
+    return save_weights_file(
+        path,
+        "hexapod",
         seeds=seeds,
         w_in=w_in,
         w_cpg=w_cpg,
         alpha=np.asarray(neuron.alpha, np.float32),
         v_th=np.asarray(neuron.v_th, np.float32),
     )
-    tmp.replace(path)
-    return path
 
 
 def load_weights(path) -> dict:
     """The arrays of a file written by `save_weights`; a one-line error if it is not one."""
-    try:
-        with np.load(path) as z:
-            if str(z["robot"]) != "hexapod":
-                raise KeyError("robot")
-            return {k: z[k] for k in z.files}
-    except (OSError, KeyError, ValueError) as e:
-        raise UserError(f"{path}: not a hexapod SCPG weights file ({e.__class__.__name__})") from None
+    return load_weights_file(path, "hexapod", "a hexapod SCPG weights file")
 
 
 def cpg_graph(w_in, w_cpg, neuron: DiscreteLIFParams, *, prefix: str = ""):

@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from robots.common import load_weights_file, save_weights_file
 from robots.robobee.controller import N_LATERAL, ControllerConfig, ControllerParams, ControllerState
 from spikejax import nir as spikejax_nir
 from spikejax.coding import DecoderParams, DecoderState, decoder_init, decoder_step
@@ -71,7 +72,6 @@ def save_controller(path, config: ControllerConfig, params: ControllerParams, st
     seeds = np.atleast_1d(np.asarray(seeds))
     dense = jax.vmap(lambda s: (s.w_ih, s.w_ho, s.mask_ih, s.mask_ho))(states)
     arrays = dict(
-        robot="robobee",
         seeds=seeds,
         n_per_input=config.n_per_input,
         n_hidden=config.n_hidden,
@@ -89,21 +89,12 @@ def save_controller(path, config: ControllerConfig, params: ControllerParams, st
     )
     if arrays["w_ih"].shape[0] != seeds.size:
         raise UserError(f"{seeds.size} seeds for a batch of {arrays['w_ih'].shape[0]} controllers")
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, **arrays)
-    tmp.replace(path)
-    return path
+    return save_weights_file(path, "robobee", **arrays)
 
 
 def load_controller(path) -> dict:
     """The arrays of a file written by `save_controller`; a one-line error if it is not one."""
-    try:
-        with np.load(path) as z:
-            if str(z["robot"]) != "robobee":
-                raise KeyError("robot")
-            return {k: z[k] for k in z.files}
-    except (OSError, KeyError, ValueError) as e:
-        raise UserError(f"{path}: not a RoboBee controller file ({e.__class__.__name__})") from None
+    return load_weights_file(path, "robobee", "a RoboBee controller file")
 
 
 def _encoder(n_per_input: int, a, b, gain):
