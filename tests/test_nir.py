@@ -29,6 +29,9 @@ from robots.robobee.controller import (  # noqa: E402
     controller_params,
     controller_step,
 )
+from robots.robobee.flight import flight_plan, fly_controller  # noqa: E402
+from robots.robobee.lqr import altitude_params, lateral_gain  # noqa: E402
+from robots.robobee.params import robobee_params  # noqa: E402
 from robots.snake import nir as snake_nir  # noqa: E402
 from robots.snake import rstdp  # noqa: E402
 from spikejax import coding  # noqa: E402
@@ -89,7 +92,7 @@ def robobee(tmp_path_factory):
     states, spikes, y_hat = make(jax.random.PRNGKey(0))
     path = tmp_path_factory.mktemp("robobee") / "controller.npz"
     robobee_nir.save_controller(path, config, params, states, [0, 1])
-    return path, spikes, y_hat
+    return path, spikes, y_hat, jax.tree.map(lambda a: a[1], states)
 
 
 def _run(graph, inputs):
@@ -99,7 +102,7 @@ def _run(graph, inputs):
 
 
 def test_robobee_round_trip_gives_the_same_spikes_bit_for_bit(robobee, tmp_path):
-    path, (s_in, s_h, s_out), _ = robobee
+    path, (s_in, s_h, s_out), *_ = robobee
     graph = spikejax_nir.read(spikejax_nir.write(tmp_path / "bee.nir", robobee_nir.export(path, seed=1)))
     assert graph.nodes["input"].v_threshold.dtype == np.float32
     assert graph.nodes["input"].metadata["spikejax"]["t_ref"] == pytest.approx(2e-3)
@@ -111,7 +114,7 @@ def test_robobee_round_trip_gives_the_same_spikes_bit_for_bit(robobee, tmp_path)
 
 
 def test_robobee_export_of_all_seeds_holds_each_seeds_weights(robobee):
-    path, _, _ = robobee
+    path, *_ = robobee
     graph = robobee_nir.export(path)
     arrays = robobee_nir.load_controller(path)
     assert set(graph.metadata["spikejax"]["seeds"]) == {0, 1}
@@ -128,14 +131,38 @@ def _steer(controller, q):
     return jax.jit(lambda q: jax.lax.scan(step, robobee_nir.graph_controller_init(controller), q)[1])(q)
 
 
-def test_exported_controller_drives_the_robobee_interface_bit_for_bit(robobee, tmp_path):
-    """The graph as a RoboBee controller (q in, Eq. (8)'s y_hat out) equals the frozen controller's y_hat."""
-    path, _, y_hat = robobee
+def test_exported_controller_flies_the_robobee_as_the_frozen_controller_does(robobee, tmp_path):
+    """The graph as a RoboBee controller (q in, Eq. (8)'s y_hat out) flies the waypoints as the frozen original does.
+
+    Both fly through `robots.robobee.flight.fly_controller`; the flights are equal
+    bit for bit, state and torque, and the network does steer (its torque varies).
+    """
+    path, _, _, original = robobee
     controller = robobee_nir.graph_controller(
         spikejax_nir.write(tmp_path / "bee.nir", robobee_nir.export(path, seed=1))
     )
-    np.testing.assert_array_equal(_steer(controller, Q), y_hat)
-    assert float(jnp.std(y_hat)) > 0.05
+    config, params = ControllerConfig(), controller_params()
+    robot = robobee_params()
+    K = jnp.asarray(lateral_gain(robot), jnp.float32).reshape(4)
+    plan = flight_plan("waypoints")
+
+    def frozen(s, error):
+        return controller_step(config, params, s, error, jnp.float32(0.0), False)
+
+    def graph(s, error):
+        return robobee_nir.graph_controller_step(controller, s, error)
+
+    def flight(step, state):
+        run = lambda s: fly_controller(
+            step, s, robot, K, altitude_params(), plan, dt=controller.dt, hold_steps=500, segment_steps=1500
+        )
+        return jax.jit(run)(state)
+
+    ours = flight(frozen, original)
+    imported = flight(graph, robobee_nir.graph_controller_init(controller))
+    np.testing.assert_array_equal(np.asarray(imported.q), np.asarray(ours.q))
+    np.testing.assert_array_equal(np.asarray(imported.y_hat), np.asarray(ours.y_hat))
+    assert float(jnp.std(ours.y_hat)) > 0.05
 
 
 def test_a_foreign_graph_drives_the_robobee_interface():
@@ -334,7 +361,7 @@ def test_unsupported_and_bad_graphs_give_one_line_errors_naming_the_node(tmp_pat
 
 def test_unit_thresholds_keeps_the_spikes(robobee):
     """Moving each threshold into the incoming weights (what snnTorch needs) changes nothing but rounding."""
-    path, _, _ = robobee
+    path, *_ = robobee
     graph = robobee_nir.export(path, seed=0)
     generic = spikejax_nir.relative_potentials(graph)  # NIR's reading, spikejax's metadata dropped
     unit = spikejax_nir.unit_thresholds(graph)
@@ -364,7 +391,7 @@ def test_command_flags_are_its_run_arguments():
 
 
 def test_command_writes_readable_graphs_of_every_robot(registered, robobee, tmp_path, capsys):
-    bee, _, _ = robobee
+    bee, *_ = robobee
     snake, _, _ = _snake_file(tmp_path, "unified")
     neuron = DiscreteLIFParams(alpha=jnp.float32(2.0), v_th=jnp.float32(1.0))
     cpg = hexapod_nir.save_weights(
@@ -385,7 +412,7 @@ def test_command_writes_readable_graphs_of_every_robot(registered, robobee, tmp_
 
 
 def test_command_errors_are_one_line(registered, robobee, tmp_path):
-    bee, _, _ = robobee
+    bee, *_ = robobee
     with pytest.raises(UserError) as e:
         export_nir.run(weights=str(bee), out=str(tmp_path / "g.nir"), robot=None, seed=9)
     _one_line(e, "no seed 9", "0, 1")
@@ -452,7 +479,7 @@ def test_robobee_controller_in_snntorch_counts_the_same_spikes(robobee):
     is lost to snnTorch, whose input, hidden and output neurons then fire 2.3,
     3.9 and 5.4 times as often as the controller does (more than twice is asserted).
     """
-    path, (s_in, s_h, s_out), _ = robobee
+    path, (s_in, s_h, s_out), *_ = robobee
     graph = spikejax_nir.unit_thresholds(robobee_nir.export(path, seed=1))
     theirs = _torch_counts(_snntorch(graph), ("input", "hidden", "output"), Q)
     ours = _run(graph, {"q": Q})

@@ -21,6 +21,7 @@ Per step, at time ``t``:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
@@ -127,6 +128,70 @@ def fly(
     Returns:
         The flight, sampled every ``record_every`` steps.
     """
+
+    def step(ctrl, error, y_lqr):
+        return controller_step(config, cparams, ctrl, error, y_lqr, jnp.float32(1.0))
+
+    def weight_means(ctrl):
+        return jnp.stack([jnp.sum(ctrl.w_ih) / jnp.sum(ctrl.mask_ih), jnp.sum(ctrl.w_ho) / jnp.sum(ctrl.mask_ho)])
+
+    ctrl = controller_init(config, cparams, key=key)
+    return _flight(
+        step, ctrl, weight_means, robot, K, altitude, plan, use_snn, cparams.dt, hold_steps, segment_steps, record_every
+    )
+
+
+def fly_controller(
+    step: Callable,
+    state,
+    robot: RoboBeeParams,
+    K: jax.Array,
+    altitude: AltitudeParams,
+    plan: FlightPlan,
+    *,
+    dt: float,
+    hold_steps: int = 5000,
+    segment_steps: int = 10000,
+    record_every: int = 10,
+) -> Recording:
+    """Fly ``plan`` with a frozen lateral controller: any ``step(state, error) -> (state, y_hat)``.
+
+    The flight of `fly` with the SNN steering, for a controller that does not
+    learn: a trained spikejax network, or a network imported from a NIR graph
+    (`robots.robobee.nir.graph_controller_step`). ``error`` is the lateral
+    error ``q_lat - q*_lat`` the SNN sees in `fly`; ``y_hat`` is in units of
+    `TORQUE_UNIT` and clipped to the actuator's range, as in `fly`. The LQR
+    teacher is still recorded (``y_lqr``) for comparison; the weight means are
+    NaN (the controller's weights are not known here).
+
+    Args:
+        step: the controller's step (closed over its static structure).
+        state: its state at the start of the hold.
+        robot, K, altitude, plan: as `fly`.
+        dt: the controller's step, s; the physics takes one step per controller step.
+        hold_steps, segment_steps, record_every: as `fly`.
+    """
+    nan = jnp.full((2,), jnp.nan, jnp.float32)
+    return _flight(
+        lambda s, error, _: step(s, error),
+        state,
+        lambda _: nan,
+        robot,
+        K,
+        altitude,
+        plan,
+        jnp.bool_(True),
+        dt,
+        hold_steps,
+        segment_steps,
+        record_every,
+    )
+
+
+def _flight(
+    controller, ctrl, weight_means, robot, K, altitude, plan, use_snn, dt, hold_steps, segment_steps, record_every
+) -> Recording:
+    """The flight's scans, for any ``controller(state, error, y_lqr) -> (state, y_hat)``."""
     model = load_model()
     n_waypoints = plan.waypoints.shape[0]
     n_steps = hold_steps + n_waypoints * segment_steps
@@ -137,7 +202,6 @@ def fly(
         )
     lat = jnp.asarray(LATERAL)
     targets = jnp.concatenate([plan.q0[None], plan.waypoints])
-    dt = cparams.dt
 
     def step(carry, i, moving):
         data, ctrl = carry
@@ -146,15 +210,12 @@ def fly(
         target = targets[segment]
         # The teacher within the actuator's range: the SNN cannot be asked for more torque than exists.
         y_lqr = jnp.clip(lateral_lqr(K, q, target) / TORQUE_UNIT, -1.0, 1.0)
-        ctrl, y_hat = controller_step(config, cparams, ctrl, q[lat] - target[lat], y_lqr, jnp.float32(1.0))
+        ctrl, y_hat = controller(ctrl, q[lat] - target[lat], y_lqr)
         if moving:
             torque = jnp.where(use_snn, jnp.clip(y_hat, -1.0, 1.0), y_lqr) * TORQUE_UNIT
             lift = altitude_control(altitude, q, target, robot)
             data = physics_step(model, data, robot, lift, torque)
         return (data, ctrl), (q, target, y_hat, y_lqr)
-
-    def weight_means(ctrl):
-        return jnp.stack([jnp.sum(ctrl.w_ih) / jnp.sum(ctrl.mask_ih), jnp.sum(ctrl.w_ho) / jnp.sum(ctrl.mask_ho)])
 
     def record(carry, block, moving):
         carry, means = carry[:2], carry[2]
@@ -164,7 +225,6 @@ def fly(
         means = jax.lax.cond(sample, weight_means, lambda _: means, carry[1])
         return (*carry, means), (q[-1], target[-1], y_hat[-1], y_lqr[-1], means[0], means[1])
 
-    ctrl = controller_init(config, cparams, key=key)
     carry = (data_at(model, plan.q0), ctrl, weight_means(ctrl))
     blocks = jnp.arange(n_steps).reshape(-1, record_every)
     n_hold = hold_steps // record_every
