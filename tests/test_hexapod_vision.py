@@ -1,0 +1,95 @@
+"""The hexapod's window-to-gait wiring (`robots.hexapod.vision`, Sec. IV-C and V-A of the hexapod paper)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from robots.hexapod import vision
+from spikejax.errors import UserError
+from spikejax.vision import edges
+
+
+def test_the_paper_map_is_60_forward_18_left_18_right():
+    region = vision.regions(vision.PAPER_SENSOR)
+    assert region.shape == (8, 12)
+    assert [(region == g).sum() for g in (vision.FORWARD, vision.LEFT, vision.RIGHT)] == [60, 18, 18]
+    assert (region[:5] == vision.FORWARD).all()
+    assert (region[5:, :6] == vision.LEFT).all() and (region[5:, 6:] == vision.RIGHT).all()
+    w = np.asarray(vision.readout(vision.PAPER_SENSOR))
+    assert set(np.unique(w[vision.FORWARD])) == {0.0, np.float32(0.4)}
+    assert set(np.unique(w[vision.LEFT])) == {0.0, np.float32(0.7)}
+    # Both branches, the same map.
+    np.testing.assert_array_equal(w[..., 0], w[..., 1])
+
+
+@pytest.mark.parametrize("window, layer2, layer3", [(100, 17, 4), (20, 4, 1), (50, 9, 2)])
+def test_scaled_weights_keep_the_papers_fractions(window, layer2, layer3):
+    """``k`` coincident spikes fire a layer and ``k - 1`` do not; at 100 pixels the paper's 17 and 4."""
+    p = vision.vision_params(vision.scaled_config(8 * window, 12 * window, window))
+    for weight, k in ((p.column, layer2), (p.window, layer3)):
+        assert k * float(weight) > 1.0 and (k - 1) * float(weight) < 1.0
+
+
+def _bar_image(config, rows, cols):
+    """One event per pixel in the given window rows and pixel columns (a vertical edge's band)."""
+    image = np.zeros((config.height, config.width), np.int32)
+    w = config.window
+    image[rows[0] * w : (rows[-1] + 1) * w, cols[0] : cols[1]] = 1
+    return jnp.asarray(image)
+
+
+@pytest.mark.parametrize(
+    "rows, cols, gait",
+    [
+        ((0, 2), (5, 75), vision.FORWARD),  # far: window rows 0-2, window columns 0-3
+        ((6, 7), (5, 35), vision.LEFT),
+        ((6, 7), (205, 235), vision.RIGHT),
+    ],
+)
+def test_an_edge_band_in_a_region_makes_its_gait_win(rows, cols, gait):
+    """On a 160 x 240 sensor of 20-pixel windows, a band of edge events in one region fires that gait's neuron only."""
+    config = vision.scaled_config(160, 240, 20)
+    params = vision.vision_params(config)
+    image = _bar_image(config, rows, cols)
+    step = jax.jit(lambda s, t: edges.sync_step(config, params, s, image, t))
+    state = edges.init(config)
+    for k in range(3):
+        state, spikes = step(state, 0.01 * (k + 1))
+    counts = np.asarray(state.counts["out"])
+    assert counts[gait] > 0 and counts.sum() == counts[gait]
+    assert int(edges.winner(state.counts["out"], jnp.int32(vision.FORWARD))) == gait
+
+
+def test_a_near_object_outvotes_a_far_one_at_equal_evidence():
+    """Window spikes arriving one at a time: 0.7 fires a turn every 2, 0.4 fires G1 every 3, so the near side wins."""
+    config = vision.scaled_config(160, 240, 20)
+    params = vision.vision_params(config, tau_out=10.0)
+    region = vision.regions(config)
+    far = np.argwhere(region == vision.FORWARD)[:6]
+    near = np.argwhere(region == vision.RIGHT)[:6]
+    state = edges.init(config)
+    out = state.out
+    fired = np.zeros(3, int)
+    for i, (f, n) in enumerate(zip(far, near)):
+        for cell in (f, n):
+            s = np.zeros((config.n_rows, config.n_cols, 2), bool)
+            s[cell[0], cell[1], 0] = True
+            out, spikes = edges._update(
+                out,
+                jnp.bool_(True),
+                edges._readout_drive(params, jnp.asarray(s)),
+                0.01 * i,
+                params.tau_out,
+                params.v_th,
+            )
+            fired += np.asarray(spikes, int)
+    assert fired[vision.RIGHT] == 3 and fired[vision.FORWARD] == 2
+    assert int(edges.winner(jnp.asarray(fired), jnp.int32(vision.FORWARD))) == vision.RIGHT
+
+
+def test_bad_maps_are_one_line_errors():
+    with pytest.raises(UserError, match="2 x 2"):
+        vision.regions(edges.EdgeConfig(height=20, width=40, window=20, n_out=3))
+    with pytest.raises(UserError, match="3 gait"):
+        vision.readout(edges.EdgeConfig(height=40, width=40, window=20, n_out=2))
