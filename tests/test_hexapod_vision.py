@@ -93,3 +93,34 @@ def test_bad_maps_are_one_line_errors():
         vision.regions(edges.EdgeConfig(height=20, width=40, window=20, n_out=3))
     with pytest.raises(UserError, match="3 gait"):
         vision.readout(edges.EdgeConfig(height=40, width=40, window=20, n_out=2))
+
+
+def test_the_network_counts_the_spikes_of_plain_numpy_loops():
+    """`edges.async_step` against `robots.hexapod.reference.reference_vision` on a moving bar with noise."""
+    from robots.hexapod.reference import reference_vision
+    from spikejax.vision.events import Events
+
+    config = vision.scaled_config(40, 60, 10)
+    params = vision.vision_params(config, tau_out=0.05)
+    rng = np.random.default_rng(3)
+    xs, ys, ts = [], [], []
+    for k in range(30):  # a 3-pixel-wide band of edge events sweeping right, low and left, then noise
+        for y in rng.permutation(np.arange(18, 40)):
+            for x in (3 + k // 3, 4 + k // 3, 5 + k // 3):
+                xs.append(x), ys.append(y), ts.append(k * 1e-3 + rng.random() * 1e-3)
+        for _ in range(10):
+            xs.append(rng.integers(60)), ys.append(rng.integers(40)), ts.append(k * 1e-3 + rng.random() * 1e-3)
+    order = np.argsort(ts, kind="stable")
+    xs, ys, ts = (np.asarray(a)[order] for a in (xs, ys, ts))
+    n = len(xs)
+    events = Events(
+        jnp.asarray(xs, jnp.int32), jnp.asarray(ys, jnp.int32), jnp.asarray(ts, jnp.float32),
+        jnp.ones(n, jnp.int32), jnp.ones(n, bool),
+    )  # fmt: skip
+    ours = jax.jit(lambda e: edges.async_step(config, params, edges.init(config), e))(events).counts
+    ref = reference_vision(config, params, xs, ys, np.asarray(events.t))
+    assert int(ours["filter"]) == ref["filter"] and int(ours["layer2"]) == ref["layer2"]
+    np.testing.assert_array_equal(np.asarray(ours["windows"]), ref["windows"])
+    np.testing.assert_array_equal(np.asarray(ours["out"]), ref["out"])
+    assert ref["filter"] > 500 and ref["layer2"] > 20 and ref["windows"].sum() > 5
+    assert ref["out"][vision.LEFT] > 0

@@ -1,9 +1,11 @@
-"""Alg. 1 written as plain NumPy loops, one trial at a time: the test oracle and the benchmark's peer.
+"""Alg. 1 and the visual SNN written as plain NumPy loops, one trial at a time: the test oracles and the benchmarks' peers.
 
-This is how the hexapod SCPG paper's algorithm reads (and how a researcher
-would run it without spikejax): loops over epochs, gaits, time steps and
-neurons. It uses the same initial weights and the same rule noise as
-`robots.hexapod.training.train`, so the two must agree to rounding.
+This is how the hexapod SCPG paper's algorithms read (and how a researcher
+would run them without spikejax): loops over epochs, gaits, time steps and
+neurons. `reference_train` uses the same initial weights and the same rule
+noise as `robots.hexapod.training.train`, so the two must agree to rounding;
+`reference_vision` is Sec. IV's network event by event, as
+`spikejax.vision.edges.async_step` runs it.
 """
 
 from __future__ import annotations
@@ -62,3 +64,78 @@ def reference_gait_correct(p: TrainParams, w_in: np.ndarray, w_cpg: np.ndarray, 
             v[s > 0] = 0.0
             ok[g] &= np.array_equal(s, gaits.PATTERNS[g][t % gaits.PERIOD])
     return ok
+
+
+def reference_vision(config, params, xs, ys, ts) -> dict:
+    """Sec. IV's visual SNN, one event at a time in Python loops (float64); the spikes of every layer counted.
+
+    Each event adds the filter kernel to the (up to) nine neurons around its
+    pixel; a filter neuron above threshold fires, resets, and adds ``column`` to
+    its window's vertical neuron of its pixel column and horizontal neuron of its
+    pixel row; those add ``window`` to their window's branch neuron, which adds
+    its readout weights to the readout neurons. Every neuron decays by
+    ``exp(-(t - t_last) / tau)`` when touched (Eq. (1)-(2), leak by event times).
+
+    Args:
+        config: a `spikejax.vision.edges.EdgeConfig`.
+        params: its `spikejax.vision.edges.EdgeParams`.
+        xs, ys, ts: the events' columns, rows and times (polarity is not used).
+
+    Returns:
+        ``{"filter", "layer2": int, "windows": (n_rows, n_cols, 2), "out": (n_out,) int arrays}``.
+    """
+    f = lambda a: np.asarray(a, np.float64)
+    kernel = {(dy, dx): float(params.centre) if dy == dx == 0 else float(params.edge) if dy == 0 or dx == 0 else float(params.corner)
+              for dy in (-1, 0, 1) for dx in (-1, 0, 1)}  # fmt: skip
+    th = float(params.v_th)
+    taus = [float(params.tau_filter), float(params.tau_column), float(params.tau_window), float(params.tau_out)]
+    readout = f(params.readout)
+    win, rows, cols = config.window, *config.used
+    layers = [
+        {"v": np.zeros(shape), "t": np.zeros(shape)}
+        for shape in (
+            (config.height, config.width),
+            (config.n_rows, cols),
+            (rows, config.n_cols),
+            (config.n_rows, config.n_cols, 2),
+            (config.n_out,),
+        )
+    ]
+    counts = {"filter": 0, "layer2": 0, "windows": np.zeros((config.n_rows, config.n_cols, 2), int)}
+    counts["out"] = np.zeros(config.n_out, int)
+
+    def touch(layer, tau, index, drive, t):
+        v = layer["v"][index] * np.exp(-(t - layer["t"][index]) / tau) + drive
+        layer["t"][index] = t
+        fired = v > th
+        layer["v"][index] = 0.0 if fired else v
+        return fired
+
+    for x, y, t in zip(np.asarray(xs), np.asarray(ys), f(ts)):
+        fired_filter = []
+        for (dy, dx), k in kernel.items():
+            yy, xx = y + dy, x + dx
+            if 0 <= yy < config.height and 0 <= xx < config.width and touch(layers[0], taus[0], (yy, xx), k, t):
+                fired_filter.append((yy, xx))
+        counts["filter"] += len(fired_filter)
+        # Layer 2: each neuron once, with all its inputs of this event.
+        inputs = {}
+        for yy, xx in fired_filter:
+            if yy < rows and xx < cols:
+                for key in ((1, yy // win, xx), (2, yy, xx // win)):
+                    inputs[key] = inputs.get(key, 0) + 1
+        window_inputs = {}
+        for (layer, i, j), n in inputs.items():
+            if touch(layers[layer], taus[1], (i, j), n * float(params.column), t):
+                counts["layer2"] += 1
+                cell = (i, j // win, 0) if layer == 1 else (i // win, j, 1)
+                window_inputs[cell] = window_inputs.get(cell, 0) + 1
+        fired_windows = np.zeros((config.n_rows, config.n_cols, 2), bool)
+        for cell, n in window_inputs.items():
+            fired_windows[cell] = touch(layers[3], taus[2], cell, n * float(params.window), t)
+        counts["windows"] += fired_windows
+        if fired_windows.any():
+            drive = np.einsum("oijb,ijb->o", readout, fired_windows)
+            for o in range(config.n_out):
+                counts["out"][o] += touch(layers[4], taus[3], o, drive[o], t)
+    return counts
