@@ -63,3 +63,25 @@ def test_bad_robots_are_one_line_errors():
         physics.load_model(friction=0.0)
     with pytest.raises(UserError, match="controls"):
         physics.walk([physics.load_model()], np.zeros((10, 5)))
+
+
+def test_the_walk_command_writes_a_gait_table_from_trained_networks(tmp_path, capsys):
+    import csv
+
+    from robots.hexapod.reproduce_walk import HEADER, run, trained_rasters
+
+    # A converged network's rasters are the gaits' patterns (Fig. 2), step for step.
+    rasters = trained_rasters(3, 6, seed=2)
+    for g in range(3):
+        np.testing.assert_array_equal(rasters[:, g], np.broadcast_to(PATTERNS[g][np.arange(6) % PERIOD], (3, 6, 6)))
+    assert run(out=tmp_path, robots=3, cycles=3, seed=2) == 0
+    with open(tmp_path / "gait_table.csv") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == HEADER
+    table = {(r[0], r[2]): float(r[3]) for r in rows[1:]}
+    assert table[("G1 tripod", "speed_m_per_s")] > 0.1
+    assert table[("G2 left turn", "turn_deg_per_s")] > 10 > -10 > table[("G3 right turn", "turn_deg_per_s")]
+    for r in rows[1:]:
+        if r[4]:
+            assert float(r[4]) <= float(r[3]) <= float(r[5])
+    assert (tmp_path / "walk_trajectories.png").stat().st_size > 10_000
