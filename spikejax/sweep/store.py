@@ -509,10 +509,14 @@ def _write_metadata(out: Path, metadata: Mapping[str, Any]) -> None:
         file.write((json.dumps(metadata, indent=2, default=str) + "\n").encode())
 
 
-def _check_same_devices(out: Path, metadata: Mapping[str, Any]) -> None:
-    """A table is finished on as many devices as it was started on (see "Resuming" above)."""
+def _check_same_devices(out: Path, metadata: Mapping[str, Any], have: int | None = None) -> None:
+    """A table is finished on as many devices as it was started on (see "Resuming" above).
+
+    ``have``: the devices a chunk is split over (None: ``jax.device_count()``; a Ray run's
+    tasks use one each).
+    """
     used = {run.get("devices", 1) for run in metadata["runs"] if run.get("computed_trials")}
-    have = jax.device_count()
+    have = jax.device_count() if have is None else have
     if used and used != {have}:
         raise UserError(
             f"{out} was computed on {', '.join(map(str, sorted(used)))} device(s) and JAX presents {have}: "
@@ -526,8 +530,10 @@ def results_path(out: Path) -> Path:
     return out / _RESULTS
 
 
-def existing(out: Path, spec: SweepSpec) -> tuple[dict[str, Any] | None, bool]:
+def existing(out: Path, spec: SweepSpec, devices: int | None = None) -> tuple[dict[str, Any] | None, bool]:
     """What ``out`` holds of ``spec``: its metadata (None: nothing yet), and whether trials are missing.
+
+    ``devices`` is the number of devices this run splits a chunk over (None: ``jax.device_count()``).
 
     Raises:
         UserError: ``out`` is not a directory, holds another sweep or files of no
@@ -541,7 +547,7 @@ def existing(out: Path, spec: SweepSpec) -> tuple[dict[str, Any] | None, bool]:
     columns = recorded_columns(metadata) if metadata is not None else None
     missing = _missing_ranges(_scan_parts(out / _PARTS, spec.n_trials, columns), spec.n_trials)
     if metadata is not None and missing:
-        _check_same_devices(out, metadata)
+        _check_same_devices(out, metadata, devices)
     return metadata, bool(missing)
 
 
