@@ -58,6 +58,13 @@ def _write(directory: Path, text: str) -> Path:
     return path
 
 
+def _error_line(err: str) -> str:
+    """The command's one error line (Ray forwards its workers' output to the driver's stderr too)."""
+    lines = [line for line in err.splitlines() if line.startswith("spikejax sweep: error:")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
 def _metadata(out: Path) -> dict:
     return json.loads((out / "metadata.json").read_text())
 
@@ -217,9 +224,8 @@ def test_a_trial_that_raises_stops_the_sweep_naming_the_chunk_and_the_trial(ray_
 
     assert cli.main(["sweep", str(path), "--out", str(out), "--ray", "--no-progress"]) == 2
 
-    err = capsys.readouterr().err.strip()
+    err = _error_line(capsys.readouterr().err)
     last = len(VALUES) - 1
-    assert "\n" not in err
     assert f"the chunk of trials {last - 1}..{last} failed, at trial {last} (seed 0, a = {VALUES[-1]!r})" in err
     assert f"ValueError: a = {VALUES[-1]} is the value this trial refuses (at {TESTS / '_sweep_ray_trials.py'}:" in err
     # The chunks done before are kept, as the local run computes them.
@@ -245,8 +251,7 @@ def test_bad_ray_flags_are_one_line_errors(tmp_path, capsys, flags, expected):
         assert cli.main(["sweep", str(path), "--out", str(out), "--compile-cache", str(tmp_path / "c"), *flags]) == 2
     finally:
         sys.path.remove(str(TESTS))
-    err = capsys.readouterr().err.strip()
-    assert expected in err and "\n" not in err
+    assert expected in _error_line(capsys.readouterr().err)
     assert not out.exists()
 
 
@@ -256,6 +261,21 @@ def test_without_ray_installed_the_error_says_how_to_install_it(tmp_path, capsys
     out = tmp_path / "out"
     path = _write(tmp_path, _sweep_text())
     assert cli.main(["sweep", str(path), "--out", str(out), "--ray", "--compile-cache", str(tmp_path / "c")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "--ray needs Ray, which is not installed: pip install 'spikejax[ray]'" in err and "\n" not in err
+    err = _error_line(capsys.readouterr().err)
+    assert "--ray needs Ray, which is not installed: pip install 'spikejax[ray]'" in err
     assert not out.exists()
+
+
+def test_a_local_run_names_the_failing_chunk_and_trial_the_same_way(reference, tmp_path, capsys, monkeypatch):
+    monkeypatch.syspath_prepend(str(TESTS))
+    path = _write(tmp_path, _sweep_text(fail_at=VALUES[3]))
+    out = tmp_path / "out"
+
+    assert cli.main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
+
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err
+    assert f"the chunk of trials 2..3 failed, at trial 3 (seed 0, a = {VALUES[3]!r})" in err
+    assert f"ValueError: a = {VALUES[3]} is the value this trial refuses (at {TESTS / '_sweep_ray_trials.py'}:" in err
+    # The chunk before, finished, is kept.
+    assert (out / "results.csv").read_bytes() == b"".join(reference.splitlines(keepends=True)[:3])

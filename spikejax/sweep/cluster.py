@@ -317,24 +317,6 @@ class _Failed(NamedTuple):
     message: str
 
 
-def _error_text(err: BaseException) -> str:
-    """One line for an exception of the trial: a traced one's file and line, or a callback's last line."""
-    from spikejax.sweep.spec import user_frame
-
-    text = str(err).strip()
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    if len(lines) > 1 and "Traceback (most recent call last)" in text:
-        # A host callback's exception comes back inside XLA's message, its traceback as text.
-        files = [line for line in lines if line.startswith('File "')]
-        user = [line for line in files if "site-packages" not in line and "/jax/" not in line]
-        where = ""
-        if user:
-            name, _, rest = user[-1][len('File "') :].partition('", line ')
-            where = f" (at {name}:{rest.split(',')[0]})"
-        return f"{lines[-1]}{where}"
-    return f"{type(err).__name__}: {_first_line(err)} (at {user_frame(err)})"
-
-
 def _compute_chunk(
     spec: Any, results: list[Any], start: int, end: int, length: int, cache_dir: str | None
 ) -> _Done | _Failed:
@@ -353,7 +335,7 @@ def _compute_chunk(
             batched = engine._batched_trial(spec, results, static_values, [device])
             _PROGRAMS[key] = batched.compile(*engine._chunk_inputs(spec, 0, 1, length))
         except Exception as err:  # noqa: BLE001 - the trial's, for these static values
-            return _Failed(None, _error_text(err))
+            return _Failed(None, engine.error_text(err))
         compile_seconds = time.perf_counter() - began
     program = _PROGRAMS[key]
 
@@ -361,40 +343,15 @@ def _compute_chunk(
         outputs = program(*engine._chunk_inputs(spec, first, last, length))
         return [np.asarray(values)[: last - first] for values in outputs]
 
-    try:
-        return _Done(run(start, end), compile_seconds, str(device))
-    except Exception as err:  # noqa: BLE001 - the trial raised while it ran
-        message = _error_text(err)
-    return _Failed(_first_failing(run, start, end), message)
-
-
-def _first_failing(run: Any, start: int, end: int) -> int | None:
-    """The first trial of ``start .. end-1`` that raises, by halves (None: none raises alone)."""
-    low, high = start, end
-    while high - low > 1:
-        middle = (low + high) // 2
+    with engine.quiet_callback_errors():
         try:
-            run(low, middle)
-        except Exception:  # noqa: BLE001
-            high = middle
-        else:
-            low = middle
-    try:
-        run(low, low + 1)
-    except Exception:  # noqa: BLE001
-        return low
-    return None
+            return _Done(run(start, end), compile_seconds, str(device))
+        except Exception as err:  # noqa: BLE001 - the trial raised while it ran
+            message = engine.error_text(err)
+        return _Failed(engine.first_failing(run, start, end), message)
 
 
 # ----------------------------------------------------------------------------- driver side
-
-
-def _trial_text(spec: Any, trial: int) -> str:
-    """``trial T (seed S, a = 1.0, ...)``: a trial and its grid values."""
-    point, seed = divmod(trial, spec.seeds)
-    coords = np.unravel_index(point, spec.grid_shape)
-    values = ", ".join(f"{axis.name} = {axis.values[int(c)]!r}" for axis, c in zip(spec.axes, coords))
-    return f"trial {trial} (seed {seed}{', ' + values if values else ''})"
 
 
 def _task_slots(cluster: Cluster) -> tuple[int, float]:
@@ -426,6 +383,8 @@ def run_chunks(
             worker died more often than Ray retries, or a worker cannot import the
             trial. The chunks finished before are written.
     """
+    from spikejax.sweep import engine
+
     ray = _import_ray()
     slots, gpus = _task_slots(cluster)
     remote = ray.remote(
@@ -484,11 +443,7 @@ def run_chunks(
             if failure is not None:
                 start, end = last
                 _stop(ray, in_flight, collect)
-                trial = f", at {_trial_text(spec, failure.trial)}" if failure.trial is not None else ""
-                raise UserError(
-                    f"sweep '{spec.name}': the chunk of trials {start}..{end - 1} failed{trial}: the trial "
-                    f"{spec.trial_path}: {failure.message} (the chunks done so far are kept)"
-                )
+                raise engine.chunk_failed(spec, start, end, failure.message, failure.trial)
             submit()
             busy()
     except BaseException:

@@ -29,7 +29,9 @@ that raised it.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import logging
 import math
 import os
 import sys
@@ -364,21 +366,102 @@ def _run_missing(
             store.add_compile_seconds(time.perf_counter() - began)
         return programs[signature]
 
-    with _progress_bar(spec, store.done, progress) as bar:
+    def run(first: int, last: int) -> list[np.ndarray]:
+        outputs = program(first)(*_chunk_inputs(spec, first, last, length))
+        return [np.asarray(values)[: last - first] for values in outputs]
+
+    def write(start: int, end: int, outputs: tuple[jax.Array, ...]) -> None:
+        try:
+            _write_chunk(spec, store, bar, start, end, outputs)
+        except UserError:
+            raise
+        except Exception as err:  # noqa: BLE001 - the trial raised while its chunk ran
+            raise chunk_failed(spec, start, end, error_text(err), first_failing(run, start, end)) from None
+
+    with _progress_bar(spec, store.done, progress) as bar, quiet_callback_errors():
         # One chunk in flight while the previous one is written: dispatch is asynchronous.
         pending = None
         for start, end in chunks:
             try:
                 outputs = program(start)(*_chunk_inputs(spec, start, end, length))
-            except BaseException:
+            except BaseException as err:
                 if pending is not None:  # the chunk before is done: keep it
-                    _write_chunk(spec, store, bar, *pending)
+                    write(*pending)
+                if isinstance(err, Exception) and not isinstance(err, UserError):
+                    raise chunk_failed(spec, start, end, error_text(err), first_failing(run, start, end)) from None
                 raise
             if pending is not None:
-                _write_chunk(spec, store, bar, *pending)
+                write(*pending)
             pending = (start, end, outputs)
         if pending is not None:
-            _write_chunk(spec, store, bar, *pending)
+            write(*pending)
+
+
+def trial_text(spec: SweepSpec, trial: int) -> str:
+    """``trial T (seed S, a = 1.0, ...)``: a trial, its seed and its grid values."""
+    point, seed = divmod(trial, spec.seeds)
+    coords = np.unravel_index(point, spec.grid_shape)
+    values = ", ".join(f"{axis.name} = {axis.values[int(c)]!r}" for axis, c in zip(spec.axes, coords))
+    return f"trial {trial} (seed {seed}{', ' + values if values else ''})"
+
+
+def error_text(err: BaseException) -> str:
+    """One line for an exception of the trial: where a traced one was raised, or a host callback's last line."""
+    text = str(err).strip()
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    if len(lines) > 1 and "Traceback (most recent call last)" in text:
+        # A host callback's exception comes back inside XLA's message, its traceback as text.
+        files = [line for line in lines if line.startswith('File "')]
+        user = [line for line in files if "site-packages" not in line and f"{os.sep}jax{os.sep}" not in line]
+        where = ""
+        if user:
+            name, _, rest = user[-1][len('File "') :].partition('", line ')
+            where = f" (at {name}:{rest.split(',')[0]})"
+        return f"{lines[-1]}{where}"
+    return f"{type(err).__name__}: {first_line(err)} (at {user_frame(err)})"
+
+
+@contextlib.contextmanager
+def quiet_callback_errors() -> Iterator[None]:
+    """JAX's log of a host callback's exception held back: the engine reports it, in one line."""
+    logger = logging.getLogger("jax._src.debugging")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def first_failing(run: Callable[[int, int], Any], start: int, end: int) -> int | None:
+    """The first trial of ``start .. end-1`` for which ``run(first, last)`` raises, found by halves.
+
+    ``run(first, last)`` computes the trials ``first .. last-1`` alone (the chunk is
+    padded with its last trial). A trial that raises only beside others gives None.
+    """
+    low, high = start, end
+    while high - low > 1:
+        middle = (low + high) // 2
+        try:
+            run(low, middle)
+        except Exception:  # noqa: BLE001
+            high = middle
+        else:
+            low = middle
+    try:
+        run(low, low + 1)
+    except Exception:  # noqa: BLE001
+        return low
+    return None
+
+
+def chunk_failed(spec: SweepSpec, start: int, end: int, message: str, trial: int | None) -> UserError:
+    """The one-line error of a chunk whose trial raised: the chunk, the trial, what it raised."""
+    at = f", at {trial_text(spec, trial)}" if trial is not None else ""
+    return UserError(
+        f"sweep '{spec.name}': the chunk of trials {start}..{end - 1} failed{at}: the trial {spec.trial_path}: "
+        f"{message} (the chunks done so far are kept)"
+    )
 
 
 def _run_on_ray(

@@ -39,7 +39,9 @@ whole, and the sweep resumes once space is freed.
 Resuming. The same sweep, run again after a run stopped however it stopped
 (SIGKILL included), skips the trials in the parts and runs the others, with
 any chunk size; the final ``results.csv`` is byte for byte the one of an
-uninterrupted run. It must run on as many devices as the first run did (each
+uninterrupted run, whether its chunks ran in this process or as Ray tasks
+(`spikejax.sweep.cluster`: the driver alone writes, and a task runs its chunk
+on one device). It must run on as many devices as the first run did (each
 run's count is in ``metadata.json``): a chunk split over devices is compiled
 apart and can differ in the last bits (some RoboBee learning flights did). The
 sweep's fingerprint (`spikejax.sweep.SweepSpec.fingerprint`) keeps the results
