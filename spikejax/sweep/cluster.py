@@ -33,7 +33,8 @@ compilation cache (``compile_cache``, a directory on storage the workers
 share, `default_compile_cache` by default) lets the first compilation of a
 program serve every worker and every later run. JAX writes only programs that
 took longer than ``jax_persistent_cache_min_compile_time_secs`` (1 s) to
-compile. Only trusted users should write in that directory: JAX loads what it
+compile and that call no host callback; it saves the XLA compilation, not the
+tracing and lowering before it. Only trusted users should write in that directory: JAX loads what it
 finds there as machine code.
 
 The code. Each worker imports the trial's module: on a cluster started here
@@ -62,6 +63,7 @@ from spikejax.errors import UserError
 
 __all__ = [
     "Cluster",
+    "check_compile_cache",
     "connect",
     "default_compile_cache",
     "disconnect",
@@ -415,7 +417,13 @@ def run_chunks(
             outcome = ray.get(ref)
         except ray.exceptions.RayTaskError as err:
             cause = getattr(err, "cause", None) or err
-            return _Failed(None, f"a Ray worker could not run it: {type(cause).__name__}: {_first_line(cause)}")
+            hint = (
+                " (install the trial's package and spikejax on every node, or run from the directory that holds "
+                "the trial's module)"
+                if "No module named" in str(cause)  # the spec could not be unpickled there
+                else ""
+            )
+            return _Failed(None, f"a Ray worker could not run it: {type(cause).__name__}: {_first_line(cause)}{hint}")
         except ray.exceptions.RayError as err:
             return _Failed(
                 None,
