@@ -241,6 +241,7 @@ def test_a_trial_that_raises_stops_the_sweep_naming_the_chunk_and_the_trial(ray_
         (["--ray", "no-port"], "--ray no-port: not an address of a Ray cluster's head (HOST:PORT, or auto)"),
         (["--ray", "127.0.0.1:1"], "--ray 127.0.0.1:1: no Ray cluster answers there"),
         (["--ray", "--cpu-devices", "2"], "--cpu-devices splits a chunk over the devices of one process"),
+        (["--ray", ""], "--ray: the address is empty"),
     ],
 )
 def test_bad_ray_flags_are_one_line_errors(tmp_path, capsys, flags, expected):

@@ -77,6 +77,8 @@ def run(
     Raises:
         UserError: a bad sweep file, flag or output directory.
     """
+    if isinstance(ray, str) and not ray.strip():
+        raise UserError("--ray: the address is empty (leave it out for $RAY_ADDRESS or a cluster of this machine)")
     if ray is not False and cpu_devices:
         raise UserError(
             "--cpu-devices splits a chunk over the devices of one process; with --ray every chunk is a task "
