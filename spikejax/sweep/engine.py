@@ -371,12 +371,12 @@ def _run_missing(
         return [np.asarray(values)[: last - first] for values in outputs]
 
     def write(start: int, end: int, outputs: tuple[jax.Array, ...]) -> None:
-        try:
-            _write_chunk(spec, store, bar, start, end, outputs)
-        except UserError:
-            raise
+        try:  # the chunk's results, waited for: what the trial raised comes out here
+            values = [np.asarray(column)[: end - start] for column in outputs]
         except Exception as err:  # noqa: BLE001 - the trial raised while its chunk ran
             raise chunk_failed(spec, start, end, error_text(err), first_failing(run, start, end)) from None
+        store.add(start, end, cells(spec, start, end, values))
+        bar.update(end - start)
 
     with _progress_bar(spec, store.done, progress) as bar, quiet_callback_errors():
         # One chunk in flight while the previous one is written: dispatch is asynchronous.
@@ -490,14 +490,6 @@ def _run_on_ray(
             bar.update(end - start)
 
         cluster.run_chunks(spec, store, results, chunks, length, bar, on_ray, cache, write)
-
-
-def _write_chunk(
-    spec: SweepSpec, store: sweep_store.Store, bar: tqdm, start: int, end: int, outputs: tuple[jax.Array, ...]
-) -> None:
-    results = [np.asarray(values)[: end - start] for values in outputs]
-    store.add(start, end, cells(spec, start, end, results))
-    bar.update(end - start)
 
 
 def _finish(spec: SweepSpec, store: sweep_store.Store, columns: list[Column], first_result: int) -> None:
