@@ -98,6 +98,7 @@ __all__ = [
 
 MODEL_PATH = pathlib.Path(__file__).with_name("snake.xml")
 BACKENDS = ("mujoco", "mjx")
+MJX_IMPLS = ("jax", "warp")  # MJX's implementations (mjx.put_model's impl)
 HEAD_BODY = "module0"
 HEAD_SITE = "head_camera"
 N_MODULES = 17
@@ -513,21 +514,22 @@ def _mujoco_backend(model, substeps, nthread, settings, dt):
     return step
 
 
-def _mjx_backend(model, substeps, settings, dt):
+def _mjx_backend(model, substeps, settings, dt, impl="jax"):
     from mujoco import mjx
 
     with jax.ensure_compile_time_eval():
-        mx = mjx.put_model(model)
+        mx = mjx.put_model(model, impl=impl)
 
     def step(state: PhysState, ctrl: jax.Array) -> PhysState:
-        data = mjx.make_data(mx).replace(
+        data = mjx.make_data(mx, impl=impl).replace(
             qpos=state.qpos, qvel=state.qvel, act=state.act, time=state.time, ctrl=jnp.asarray(ctrl, jnp.float32)
         )
 
         def sub(d, _):
             return mjx.step(mx, d), None
 
-        with mjx_level_barriers():
+        # The barriers are for XLA's CPU fusion pass on MJX's JAX implementation.
+        with mjx_level_barriers() if impl == "jax" else contextlib.nullcontext():
             data, _ = jax.lax.scan(sub, data, None, length=substeps)
         return _observe(data.qpos, data.qvel, data.act, data.time, settings, dt)
 
@@ -541,6 +543,7 @@ def make_physics(
     substeps: int | None = None,
     nthread: int | None = None,
     settings: str = "tuned",
+    mjx_impl: str = "jax",
 ) -> SnakePhysics:
     """The snake's physics with the given backend (see the module's notes).
 
@@ -554,6 +557,9 @@ def make_physics(
         nthread: threads of the C backend's pool (default: all CPU cores);
             ignored by ``"mjx"``.
         settings: ``"tuned"`` or ``"default"`` model settings (`load_mj_model`).
+        mjx_impl: MJX's implementation for ``"mjx"``: ``"jax"`` (anywhere) or
+            ``"warp"`` (MJX-Warp, which MuJoCo points users of large or
+            contact-rich scenes to; needs ``mujoco-warp`` and a CUDA GPU).
 
     Returns:
         A `SnakePhysics`.
@@ -566,6 +572,13 @@ def make_physics(
     """
     if backend not in BACKENDS:
         raise UserError(f"unknown physics backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    if mjx_impl not in MJX_IMPLS:
+        raise UserError(f"unknown MJX implementation {mjx_impl!r}; expected one of {', '.join(MJX_IMPLS)}")
+    if backend == "mjx" and mjx_impl == "warp":
+        try:
+            import mujoco_warp  # noqa: F401
+        except ImportError:
+            raise UserError("mjx_impl='warp' needs MJX-Warp: pip install mujoco-warp (on a CUDA GPU)") from None
     if settings not in ("default", "tuned"):
         raise UserError(f"unknown snake model settings {settings!r}; expected 'default' or 'tuned'")
     if dt is None:
@@ -582,5 +595,5 @@ def make_physics(
     if backend == "mujoco":
         step = _mujoco_backend(model, int(substeps), int(nthread), settings, dt)
     else:
-        step = _mjx_backend(model, int(substeps), settings, dt)
+        step = _mjx_backend(model, int(substeps), settings, dt, mjx_impl)
     return SnakePhysics(backend, dt, int(substeps), settings, model, _initial_state(model, settings, dt), step)

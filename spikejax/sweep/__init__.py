@@ -68,6 +68,9 @@ The package, one concern a module (each documents its own rules):
 - `spikejax.sweep.engine`: chunks, the compiled program per static values,
   the split over devices (`spikejax.devices`), the run loop and progress
   (`run_sweep`, `trial_key`).
+- `spikejax.sweep.cluster`: the chunks as Ray tasks (``run_sweep(..., ray=True)``,
+  ``spikejax sweep --ray``): the cluster, the workers' compiled programs, the
+  persistent compilation cache, failures; the driver alone writes.
 - `spikejax.sweep.table`: the columns, their dtypes, and the text of a cell.
 - `spikejax.sweep.store`: the output directory, the one place that knows the
   files: atomic writes, the lock, the parts, ``results.csv`` and

@@ -29,7 +29,9 @@ that raised it.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import logging
 import math
 import os
 import sys
@@ -45,6 +47,7 @@ from tqdm import tqdm
 
 from spikejax.devices import BatchSplit, shard_batch
 from spikejax.errors import UserError
+from spikejax.sweep import cluster
 from spikejax.sweep import store as sweep_store
 from spikejax.sweep.spec import SweepSpec, first_line, user_frame
 from spikejax.sweep.table import NONFINITE, Column, cells, key_columns, result_dtype
@@ -234,7 +237,15 @@ def _progress_bar(spec: SweepSpec, done: int, enabled: bool) -> tqdm:
     )
 
 
-def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool = True) -> Path:
+def run_sweep(
+    spec: SweepSpec,
+    out_dir: str | os.PathLike[str],
+    progress: bool = True,
+    *,
+    ray: bool | str = False,
+    compile_cache: str | os.PathLike[str] | None = None,
+    ray_cpus: int | None = None,
+) -> Path:
     """Run the trials of ``spec`` that ``out_dir`` does not hold yet.
 
     The trials run in chunks of ``spec.chunk_size`` consecutive rows through one
@@ -249,6 +260,14 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
         spec: the sweep, from `spikejax.sweep.load_sweep`.
         out_dir: the output directory; created if missing.
         progress: show a progress bar (trials/s, ETA) on stderr.
+        ray: run the chunks as tasks on a Ray cluster (`spikejax.sweep.cluster`):
+            True for ``$RAY_ADDRESS`` or else a cluster started on this machine
+            (loopback only), a string for the address of a running cluster.
+            False: in this process.
+        compile_cache: a directory for JAX's persistent compilation cache (a Ray
+            run's default: `spikejax.sweep.cluster.default_compile_cache`; a
+            local run uses none unless given one).
+        ray_cpus: the CPUs of a Ray cluster started here (default: all).
 
     Returns:
         The path of ``results.csv``.
@@ -261,10 +280,13 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
             while traced (the message names the user's file and line). All are
             found before anything is compiled. Later: the disk fills up (the
             files stay whole; run again to resume), or a static value the trial
-            rejects when its chunks come.
+            rejects when its chunks come. With ``ray``: Ray is not installed or no
+            cluster answers (before anything is written), a trial raises (the
+            chunk and the trial are named, the finished chunks kept).
     """
     out = Path(out_dir)
-    metadata, missing = sweep_store.existing(out, spec)
+    # A Ray task runs its chunk on one device of its worker.
+    metadata, missing = sweep_store.existing(out, spec, devices=1 if ray else None)
     if metadata is not None and not missing:
         columns = sweep_store.recorded_columns(metadata)
     else:
@@ -273,25 +295,48 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike[str], progress: bool =
     first_result = len(key_columns(spec))
     if missing:
         sweep_store.check_space(out, spec, columns)
-    with sweep_store.opened(out, spec, metadata, columns, spec.chunk_size) as store:
-        try:
-            _run_missing(spec, store, columns[first_result:], progress)
-        finally:
-            store.publish()
-        if store.done == spec.n_trials:
-            _finish(spec, store, columns, first_result)
+    cache = None
+    if compile_cache is not None or (ray and missing):
+        cache = cluster.check_compile_cache(compile_cache or cluster.default_compile_cache())
+        if not ray:
+            cluster.use_compile_cache(cache)
+    connected = cluster.is_connected()
+    on_ray = cluster.connect(ray, num_cpus=ray_cpus) if ray and missing else None
+    try:
+        with sweep_store.opened(out, spec, metadata, columns, spec.chunk_size) as store:
+            if cache is not None:
+                store.run["compile_cache"] = str(cache)
+            try:
+                _run_missing(spec, store, columns[first_result:], progress, on_ray, cache)
+            finally:
+                store.publish()
+            if store.done == spec.n_trials:
+                _finish(spec, store, columns, first_result)
+    finally:
+        if on_ray is not None and not connected:
+            cluster.disconnect()
     return sweep_store.results_path(out)
 
 
-def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column], progress: bool) -> None:
+def _run_missing(
+    spec: SweepSpec,
+    store: sweep_store.Store,
+    results: list[Column],
+    progress: bool,
+    on_ray: cluster.Cluster | None = None,
+    cache: Path | None = None,
+) -> None:
     missing = store.missing()
     if not missing:
         return
     block = _static_block(spec)
     chunks = list(_chunks(missing, spec.chunk_size, block))
-    devices = jax.devices()
     # Every chunk is padded with its last trial to the longest: one program serves them all.
     length = max(end - start for start, end in chunks)
+    if on_ray is not None:
+        _run_on_ray(spec, store, results, progress, on_ray, cache, chunks, length)
+        return
+    devices = jax.devices()
     store.begin_compute(len(devices))
     programs: dict[tuple[Any, ...], Callable[..., tuple[jax.Array, ...]]] = {}
 
@@ -321,29 +366,130 @@ def _run_missing(spec: SweepSpec, store: sweep_store.Store, results: list[Column
             store.add_compile_seconds(time.perf_counter() - began)
         return programs[signature]
 
-    with _progress_bar(spec, store.done, progress) as bar:
+    def run(first: int, last: int) -> list[np.ndarray]:
+        outputs = program(first)(*_chunk_inputs(spec, first, last, length))
+        return [np.asarray(values)[: last - first] for values in outputs]
+
+    def write(start: int, end: int, outputs: tuple[jax.Array, ...]) -> None:
+        try:  # the chunk's results, waited for: what the trial raised comes out here
+            values = [np.asarray(column)[: end - start] for column in outputs]
+        except Exception as err:  # noqa: BLE001 - the trial raised while its chunk ran
+            raise chunk_failed(spec, start, end, error_text(err), first_failing(run, start, end)) from None
+        store.add(start, end, cells(spec, start, end, values))
+        bar.update(end - start)
+
+    with _progress_bar(spec, store.done, progress) as bar, quiet_callback_errors():
         # One chunk in flight while the previous one is written: dispatch is asynchronous.
         pending = None
         for start, end in chunks:
             try:
                 outputs = program(start)(*_chunk_inputs(spec, start, end, length))
-            except BaseException:
+            except BaseException as err:
                 if pending is not None:  # the chunk before is done: keep it
-                    _write_chunk(spec, store, bar, *pending)
+                    write(*pending)
+                if isinstance(err, Exception) and not isinstance(err, UserError):
+                    raise chunk_failed(spec, start, end, error_text(err), first_failing(run, start, end)) from None
                 raise
             if pending is not None:
-                _write_chunk(spec, store, bar, *pending)
+                write(*pending)
             pending = (start, end, outputs)
         if pending is not None:
-            _write_chunk(spec, store, bar, *pending)
+            write(*pending)
 
 
-def _write_chunk(
-    spec: SweepSpec, store: sweep_store.Store, bar: tqdm, start: int, end: int, outputs: tuple[jax.Array, ...]
+def trial_text(spec: SweepSpec, trial: int) -> str:
+    """``trial T (seed S, a = 1.0, ...)``: a trial, its seed and its grid values."""
+    point, seed = divmod(trial, spec.seeds)
+    coords = np.unravel_index(point, spec.grid_shape)
+    values = ", ".join(f"{axis.name} = {axis.values[int(c)]!r}" for axis, c in zip(spec.axes, coords))
+    return f"trial {trial} (seed {seed}{', ' + values if values else ''})"
+
+
+def error_text(err: BaseException) -> str:
+    """One line for an exception of the trial: where a traced one was raised, or a host callback's last line."""
+    text = str(err).strip()
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    if len(lines) > 1 and "Traceback (most recent call last)" in text:
+        # A host callback's exception comes back inside XLA's message, its traceback as text.
+        files = [line for line in lines if line.startswith('File "')]
+        user = [line for line in files if "site-packages" not in line and f"{os.sep}jax{os.sep}" not in line]
+        where = ""
+        if user:
+            name, _, rest = user[-1][len('File "') :].partition('", line ')
+            where = f" (at {name}:{rest.split(',')[0]})"
+        return f"{lines[-1]}{where}"
+    return f"{type(err).__name__}: {first_line(err)} (at {user_frame(err)})"
+
+
+@contextlib.contextmanager
+def quiet_callback_errors() -> Iterator[None]:
+    """JAX's log of a host callback's exception held back: the engine reports it, in one line."""
+    logger = logging.getLogger("jax._src.debugging")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def first_failing(run: Callable[[int, int], Any], start: int, end: int) -> int | None:
+    """The first trial of ``start .. end-1`` for which ``run(first, last)`` raises, found by halves.
+
+    ``run(first, last)`` computes the trials ``first .. last-1`` alone (the chunk is
+    padded with its last trial). A trial that raises only beside others gives None.
+    """
+    low, high = start, end
+    while high - low > 1:
+        middle = (low + high) // 2
+        try:
+            run(low, middle)
+        except Exception:  # noqa: BLE001
+            high = middle
+        else:
+            low = middle
+    try:
+        run(low, low + 1)
+    except Exception:  # noqa: BLE001
+        return low
+    return None
+
+
+def chunk_failed(spec: SweepSpec, start: int, end: int, message: str, trial: int | None) -> UserError:
+    """The one-line error of a chunk whose trial raised: the chunk, the trial, what it raised."""
+    at = f", at {trial_text(spec, trial)}" if trial is not None else ""
+    return UserError(
+        f"sweep '{spec.name}': the chunk of trials {start}..{end - 1} failed{at}: the trial {spec.trial_path}: "
+        f"{message} (the chunks done so far are kept)"
+    )
+
+
+def _run_on_ray(
+    spec: SweepSpec,
+    store: sweep_store.Store,
+    results: list[Column],
+    progress: bool,
+    on_ray: cluster.Cluster,
+    cache: Path | None,
+    chunks: list[tuple[int, int]],
+    length: int,
 ) -> None:
-    results = [np.asarray(values)[: end - start] for values in outputs]
-    store.add(start, end, cells(spec, start, end, results))
-    bar.update(end - start)
+    store.begin_compute(1)
+    store.run["ray"] = on_ray.record()
+    if progress:
+        print(
+            f"{spec.name}: {len(chunks)} chunks of {length} trials as Ray tasks on {on_ray.nodes} node(s), "
+            f"{on_ray.cpus:g} CPUs, {on_ray.gpus:g} GPUs ({on_ray.address})",
+            file=sys.stderr,
+            flush=True,
+        )
+    with _progress_bar(spec, store.done, progress) as bar:
+
+        def write(start: int, end: int, outputs: list[np.ndarray]) -> None:
+            store.add(start, end, cells(spec, start, end, outputs))
+            bar.update(end - start)
+
+        cluster.run_chunks(spec, store, results, chunks, length, bar, on_ray, cache, write)
 
 
 def _finish(spec: SweepSpec, store: sweep_store.Store, columns: list[Column], first_result: int) -> None:

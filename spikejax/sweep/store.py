@@ -39,7 +39,9 @@ whole, and the sweep resumes once space is freed.
 Resuming. The same sweep, run again after a run stopped however it stopped
 (SIGKILL included), skips the trials in the parts and runs the others, with
 any chunk size; the final ``results.csv`` is byte for byte the one of an
-uninterrupted run. It must run on as many devices as the first run did (each
+uninterrupted run, whether its chunks ran in this process or as Ray tasks
+(`spikejax.sweep.cluster`: the driver alone writes, and a task runs its chunk
+on one device). It must run on as many devices as the first run did (each
 run's count is in ``metadata.json``): a chunk split over devices is compiled
 apart and can differ in the last bits (some RoboBee learning flights did). The
 sweep's fingerprint (`spikejax.sweep.SweepSpec.fingerprint`) keeps the results
@@ -509,10 +511,14 @@ def _write_metadata(out: Path, metadata: Mapping[str, Any]) -> None:
         file.write((json.dumps(metadata, indent=2, default=str) + "\n").encode())
 
 
-def _check_same_devices(out: Path, metadata: Mapping[str, Any]) -> None:
-    """A table is finished on as many devices as it was started on (see "Resuming" above)."""
+def _check_same_devices(out: Path, metadata: Mapping[str, Any], have: int | None = None) -> None:
+    """A table is finished on as many devices as it was started on (see "Resuming" above).
+
+    ``have``: the devices a chunk is split over (None: ``jax.device_count()``; a Ray run's
+    tasks use one each).
+    """
     used = {run.get("devices", 1) for run in metadata["runs"] if run.get("computed_trials")}
-    have = jax.device_count()
+    have = jax.device_count() if have is None else have
     if used and used != {have}:
         raise UserError(
             f"{out} was computed on {', '.join(map(str, sorted(used)))} device(s) and JAX presents {have}: "
@@ -526,8 +532,10 @@ def results_path(out: Path) -> Path:
     return out / _RESULTS
 
 
-def existing(out: Path, spec: SweepSpec) -> tuple[dict[str, Any] | None, bool]:
+def existing(out: Path, spec: SweepSpec, devices: int | None = None) -> tuple[dict[str, Any] | None, bool]:
     """What ``out`` holds of ``spec``: its metadata (None: nothing yet), and whether trials are missing.
+
+    ``devices`` is the number of devices this run splits a chunk over (None: ``jax.device_count()``).
 
     Raises:
         UserError: ``out`` is not a directory, holds another sweep or files of no
@@ -541,7 +549,7 @@ def existing(out: Path, spec: SweepSpec) -> tuple[dict[str, Any] | None, bool]:
     columns = recorded_columns(metadata) if metadata is not None else None
     missing = _missing_ranges(_scan_parts(out / _PARTS, spec.n_trials, columns), spec.n_trials)
     if metadata is not None and missing:
-        _check_same_devices(out, metadata)
+        _check_same_devices(out, metadata, devices)
     return metadata, bool(missing)
 
 
