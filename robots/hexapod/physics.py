@@ -11,7 +11,9 @@ matter most for walking: friction, mass and servo gain.
 
 `walk` steps a batch of (possibly different) robots through the same or
 different servo-target sequences with ``mujoco.rollout`` (one C thread per
-core), from the robot standing still on its six feet.
+core), from the robot standing still on its six feet; `mjx_walk` does the same
+for one robot and a batch of sequences as one XLA program with MJX (for
+accelerators), and agrees with it (``tests/test_hexapod_walk.py``).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from mujoco import rollout as mj_rollout
 
 from spikejax.errors import UserError
 
-__all__ = ["MODEL_PATH", "load_model", "randomised", "standing_state", "Walk", "walk"]
+__all__ = ["MODEL_PATH", "load_model", "randomised", "standing_state", "Walk", "walk", "mjx_walk"]
 
 MODEL_PATH = Path(__file__).with_name("hexapod.xml")
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -101,10 +103,37 @@ def walk(models: list[mujoco.MjModel], controls: np.ndarray, nthread: int | None
     nthread = nthread or os.cpu_count() or 1
     datas = [mujoco.MjData(models[0]) for _ in range(nthread)]
     states, _ = mj_rollout.rollout(list(models), datas, initial, np.ascontiguousarray(controls))
-    q = states[..., 1 : 1 + models[0].nq]
-    w, x, y, z = (q[..., 3 + i] for i in range(4))
+    t = (np.arange(controls.shape[1]) + 1) * models[0].opt.timestep
+    return _walk_of(t, states[..., 1 : 1 + models[0].nq])
+
+
+def _walk_of(t, qpos) -> Walk:
+    w, x, y, z = (qpos[..., 3 + i] for i in range(4))
     yaw = np.unwrap(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), axis=-1)
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1, 1))
-    t = (np.arange(controls.shape[1]) + 1) * models[0].opt.timestep
-    return Walk(t=t, xy=q[..., :2], yaw=yaw, roll=roll, pitch=pitch, height=q[..., 2])
+    return Walk(t=t, xy=qpos[..., :2], yaw=yaw, roll=roll, pitch=pitch, height=qpos[..., 2])
+
+
+def mjx_walk(model: mujoco.MjModel, controls) -> Walk:
+    """`walk` on MJX: one robot, a batch of servo-target sequences ``(batch, n_steps, 12)``, one XLA program."""
+    import jax
+    from mujoco import mjx
+
+    controls = np.asarray(controls, np.float32)
+    if controls.ndim != 3 or controls.shape[-1] != model.nu:
+        raise UserError(f"controls must be (batch, n_steps, {model.nu})")
+    data = mujoco.MjData(model)
+    mujoco.mj_setState(model, data, standing_state(model), _STATE)
+    mujoco.mj_forward(model, data)
+    mx, dx = mjx.put_model(model), mjx.put_data(model, data)
+
+    def one(u):
+        def step(d, c):
+            d = mjx.step(mx, d.replace(ctrl=c))
+            return d, d.qpos
+
+        return jax.lax.scan(step, dx, u)[1]
+
+    qpos = np.asarray(jax.jit(jax.vmap(one))(controls), np.float64)
+    return _walk_of((np.arange(controls.shape[1]) + 1) * model.opt.timestep, qpos)
