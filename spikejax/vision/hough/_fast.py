@@ -86,7 +86,7 @@ def _pixel(grid, events: Events) -> tuple[jax.Array, jax.Array]:
 
 def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Array:
     """`spikejax.vision.hough.line_votes`, by `_line_accumulator`."""
-    return _line_accumulator(grid, signed)(events)
+    return _line_accumulator(grid, signed, merge=grid.merge_pixels)(events)
 
 
 @functools.cache
@@ -97,32 +97,61 @@ def _compact_table(grid: LineGrid) -> np.ndarray:
 
 
 @functools.cache
-def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576):
+def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576, merge: bool = False):
     """`line_votes` for one stream: scatter-adds of the events' table rows.
 
-    The events go ``chunk`` at a time (a ``lax.scan``), so that the cell indices
+    With ``merge``, the events at the same pixel are first summed into one
+    vote of their total weight (the accumulator is linear in the events:
+    ``sum_e w_e T[pixel_e] = sum_pixels (sum of w_e at the pixel) T[pixel]``, in
+    integers, so exactly), pixels whose events cancel are dropped, and the
+    remaining votes are packed to the front; chunks past the last vote are
+    skipped. A slot then costs votes for its active pixels, not for its events
+    or its capacity.
+
+    The votes go ``chunk`` at a time (a ``lax.scan``), so that the cell indices
     and weights of a chunk (``chunk * n_theta`` of each) stay in the CPU's L2
     cache between being gathered and being scattered. Counts are summed in
     int32 (exact, as float32 sums of +-1 are); the table is gathered as uint16.
     Streams run one at a time on a CPU (`_one_stream_at_a_time`).
     """
     table = _compact_table(grid)
+    n_pixels = grid.height * grid.width
 
     def accumulate(events):
         pixel, ok = _pixel(grid, events)
         w = jnp.where(ok, events.p if signed else 1, 0).astype(jnp.int32)
-        n_chunks = -(-pixel.shape[0] // chunk)
-        length = -(-pixel.shape[0] // n_chunks)
-        pad = n_chunks * length - pixel.shape[0]  # padding events have weight 0
+        n = pixel.shape[0]
+        if merge:
+            order = jnp.arange(n, dtype=jnp.int32)
+            first = jnp.full((n_pixels,), n, jnp.int32).at[pixel].min(jnp.where(ok, order, n))
+            total = jnp.zeros((n_pixels,), jnp.int32).at[pixel].add(w)[pixel]
+            keep = ok & (first[pixel] == order) & (total != 0)
+            rank = jnp.cumsum(keep.astype(jnp.int32))
+            slot = jnp.where(keep, rank - 1, n)
+            pixel = jnp.zeros((n + 1,), pixel.dtype).at[slot].set(pixel, mode="promise_in_bounds")[:n]
+            w = jnp.zeros((n + 1,), jnp.int32).at[slot].set(total, mode="promise_in_bounds")[:n]
+            votes = rank[-1]
+        n_chunks = -(-n // chunk)
+        length = -(-n // n_chunks)
+        pad = n_chunks * length - n  # padding events have weight 0
         pixel = jnp.pad(pixel, (0, pad)).astype(jnp.uint32).reshape(n_chunks, length)
         w = jnp.pad(w, (0, pad)).reshape(n_chunks, length)
 
         def add(acc, part):
             pixel, w = part
             cells = jnp.asarray(table).at[pixel].get(mode="promise_in_bounds")
-            return acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta), mode="promise_in_bounds"), None
+            return acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta), mode="promise_in_bounds")
 
-        acc, _ = jax.lax.scan(add, jnp.zeros((grid.size + 1,), jnp.int32), (pixel, w))
+        def maybe_add(acc, part):
+            if not merge:
+                return add(acc, part), None
+            start, pixel, w = part
+            return jax.lax.cond(start < votes, add, lambda acc, _: acc, acc, (pixel, w)), None
+
+        starts = jnp.arange(n_chunks, dtype=jnp.int32) * length
+        acc, _ = jax.lax.scan(
+            maybe_add, jnp.zeros((grid.size + 1,), jnp.int32), (starts, pixel, w) if merge else (pixel, w)
+        )
         return acc[: grid.size].reshape(grid.shape).astype(jnp.float32)
 
     return _one_stream_at_a_time(accumulate)
