@@ -53,15 +53,19 @@ and why these won:
   (one forward, 64 inverse real FFTs of 192 x 192, the smallest size without
   wrap-around), independent of the number of events; scattering every event's
   ~13,000 ring cells is 100x more work.
-* Async: one ``lax.scan`` over event positions for the whole batch; each step
-  gathers the ``(v, t_last)`` of the 180 cells of event ``i`` of every stream
-  from a flat state of all streams' grids, decays them lazily and writes them
-  back by one scatter-add of the change (XLA updates in place after a gather
-  for an add, but copies for a set); inhibition runs in a ``lax.cond`` only on
-  steps where some stream fired, its fired cells packed to the front and
-  visited 8 per stream at a time. Running the streams one after another
-  (``lax.map``, one event a step, as before) is 1.4-1.7x slower: each step is
-  a dozen small XLA operations, about 4 us an event whatever their size.
+* Async, line grid: the streams one after another (``lax.map``), each through
+  one ``lax.scan`` over its events with its whole grid kept in the cache: the
+  ``(v, t_last)`` of a cell as one complex64, a padded border so that every
+  3 x 3 window is inside the array, each event one gather and one scatter-add
+  of its 180 cells, and the fired cells packed 16 at a time by a cumulative sum
+  for the inhibition windows. One ``lax.scan`` over event positions for the
+  whole batch (a gather and a scatter-add of the 180 cells of event ``i`` of
+  every stream in a flat state of all grids, as before; still the circle grid's
+  async loop) misses the cache once the batch's grids outgrow it (numbers in
+  docs/BENCHMARKS.md).
+* Sync, ``LineGrid(merge_pixels=True)``: a slot's events summed per pixel
+  before voting (the same accumulator); not the default, since the bench
+  frames have one event a pixel.
 """
 
 from __future__ import annotations
@@ -122,6 +126,7 @@ COLUMNS = [
     "parallel",
     "peer",
     "x_peer",
+    "x_opencv",
 ]
 
 
@@ -200,6 +205,8 @@ PEERS = (
     ("circle", "OpenCV HoughCircles", "per frame"),
     ("line", "NumPy per-event loop", "async"),
 )
+# The OpenCV peer of the sync and per-frame rows (accumulator and peak search), by shape: `x_opencv`.
+OPENCV_PEER = {"line": "OpenCV HoughLines", "circle": "OpenCV HoughCircles"}
 # The peer every row's ratio is taken to, by (shape, mode).
 RATIO_PEER = {
     ("line", "sync"): "skimage hough_line",
@@ -394,6 +401,12 @@ def run(
     add_ratios(
         rows, "x_peer", "frames_per_s", lambda p, r: p["implementation"].startswith(RATIO_PEER[r["shape"], r["mode"]])
     )
+    add_ratios(
+        rows,
+        "x_opencv",
+        "frames_per_s",
+        lambda p, r: r["mode"] != "async" and p["implementation"].startswith(OPENCV_PEER[r["shape"]]),
+    )
     for r in rows:  # async: a frame is a stream's one slot, the peer's too, so the ratio is that of events/s
         r["peer"] = RATIO_PEER[r["shape"], r["mode"]]
 
@@ -446,7 +459,8 @@ def _print(rows: list[dict], n_dev: int) -> None:
             f"{r['frames_per_s']:10.1f} {r['events_per_s'] / 1e6:10.3f} {r['x_peer']:7.2f}"
         )
     print(
-        "(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; async in events/s)"
+        "(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; async in events/s;\n"
+        " x_opencv in hough.csv: against OpenCV HoughLines / HoughCircles given the same cores)"
     )
     print("\nmeasured in this run (ratios to the peer on the same frames and cores; the best row):")
     for cores in sorted({1, n_dev}):
@@ -471,9 +485,10 @@ def _print(rows: list[dict], n_dev: int) -> None:
                 if unit == "frames"
                 else f"{best['events_per_s'] / 1e6:.3f} M events/s"
             )
+            opencv = "" if np.isnan(best["x_opencv"]) else f", {best['x_opencv']:.2f} x {OPENCV_PEER[shape]}"
             print(
                 f"  {shape}, {mode}, {cores} core{'s' if cores > 1 else ''}: {rate} at batch {best['batch']} = "
-                f"{best['x_peer']:.2f} x {best['peer']} ({best['parallel']} against "
+                f"{best['x_peer']:.2f} x {best['peer']}{opencv} ({best['parallel']} against "
                 f"{cores_label(cores, 'process')})"
             )
     print("\nTable 1 of the paper (whole pipe tracker, frames/s):")
