@@ -401,105 +401,6 @@ def _async_batch(params: HoughParams, grid: Grid, state: HoughState, events: Eve
     return state, jnp.moveaxis(spikes, 0, 1)
 
 
-@functools.cache
-def _padded_line_table(grid: LineGrid) -> tuple[np.ndarray, int]:
-    """`line_table` in the layout of `_line_async_stream`: cells of a ``(n_theta + 5, n_rho + 2)`` grid.
-
-    Cell ``(k, j)`` of the line grid is ``(k + 1, j + 1)`` there: a border of one
-    cell all round, so that every 3 x 3 neighbourhood is a window inside the
-    array, and three spare rows below, whose middle cell ``dummy`` (returned)
-    takes the votes that fall outside the grid.
-    """
-    table = line_table(grid).astype(np.int64)
-    w = grid.n_rho + 2
-    k = np.arange(grid.n_theta)[None, :]
-    dummy = (grid.n_theta + 3) * w + 1
-    cells = np.where(table < grid.size, (k + 1) * w + (table - k * grid.n_rho) + 1, dummy)
-    return cells.astype(np.uint16 if (grid.n_theta + 5) * w < 2**16 else np.int32), dummy
-
-
-@functools.cache
-def _line_async_stream(grid: LineGrid, chunk: int = 16, unroll: int = 4):
-    """`async_run` on a line grid for one stream, its grid kept whole in the cache across its events.
-
-    The state is one complex64 array, ``v + i t_last`` a cell, in the padded
-    layout of `_padded_line_table` (270 kB for the paper's 180 x 180 grid: it
-    stays in a core's L2 cache while the stream's events go through it). Each
-    event gathers its ``n_theta`` cells as one 8-byte element each, applies
-    Alg. 1, lines 2-3, and adds the change back (a scatter-add after a gather
-    updates in place; ``v_old + (v_new - v_old)`` as in `neuron.async_event`).
-    Inhibition (lines 5-7): the fired cells are packed to the front ``chunk`` at a
-    time by a cumulative sum and their 3 x 3 windows, which never leave the
-    padded array, set to ``v = 0`` keeping each cell's ``t_last``; the fired
-    cells past the first ``chunk`` (rare) take a second, masked pass over all
-    ``n_theta`` windows. The event loop is unrolled ``unroll`` times.
-
-    Returns ``run(v_th, rate, v, t, events)`` for scalars ``v_th``, ``rate``, a
-    state ``(v, t)`` of ``grid.shape`` and events ``(n_slots, capacity)``, giving
-    ``(HoughState, spikes (n_slots, *grid.shape) int8)``.
-    """
-    table, dummy = _padded_line_table(grid)  # NumPy: this closure is cached across traces
-    w, rows = grid.n_rho + 2, grid.n_theta + 5
-    nine = (np.arange(-1, 2)[:, None] * w + np.arange(-1, 2)[None, :]).reshape(-1).astype(np.int32)
-
-    def reset(flat, centres):
-        near = (centres[:, None] + jnp.asarray(nine)).reshape(-1)
-        old = flat.at[near].get(mode="promise_in_bounds")
-        return flat.at[near].set(jax.lax.complex(jnp.zeros(old.shape, jnp.float32), jnp.imag(old)))
-
-    def run(v_th, rate, v, t, events):
-        def step(carry, event):
-            flat, out = carry
-            x, y, t, p, valid = event
-            on = valid & (x >= 0) & (x < grid.width) & (y >= 0) & (y < grid.height)
-            row = jax.lax.dynamic_index_in_dim(jnp.asarray(table), jnp.where(on, y * grid.width + x, 0), keepdims=False)
-            cells = jnp.where(on, row.astype(jnp.int32), dummy)
-            ok = cells != dummy
-            old = flat.at[cells].get(mode="promise_in_bounds")
-            v_old, t_old = jnp.real(old), jnp.imag(old)
-            new = decay(v_old, rate * (t - t_old)) + p.astype(jnp.float32)
-            change = jnp.where(ok, jax.lax.complex(new - v_old, t - t_old), 0)
-            flat = flat.at[cells].add(change, mode="promise_in_bounds")
-            fired = ok & (jnp.abs(new) >= v_th)
-            rank = jnp.cumsum(fired.astype(jnp.int32))
-            place = jnp.where(fired & (rank <= chunk), rank - 1, chunk)
-            first = jnp.full((chunk + 1,), dummy, jnp.int32).at[place].set(cells, mode="promise_in_bounds")
-            flat = reset(flat, first[:chunk])
-            flat = jax.lax.cond(
-                rank[-1] > chunk, lambda f: reset(f, jnp.where(fired & (rank > chunk), cells, dummy)), lambda f: f, flat
-            )
-            out = out.at[jnp.where(fired, cells, dummy)].set(jnp.sign(new).astype(jnp.int8), mode="promise_in_bounds")
-            return (flat, out), None
-
-        def slot(flat, events):
-            out = jnp.zeros((rows * w,), jnp.int8)
-            (flat, out), _ = jax.lax.scan(step, (flat, out), events, unroll=unroll)
-            return flat, out.reshape(rows, w)[1:-4, 1:-1]
-
-        z = jnp.zeros((rows, w), jnp.complex64).at[1:-4, 1:-1].set(jax.lax.complex(v, t))
-        flat, spikes = jax.lax.scan(slot, z.reshape(-1), tuple(events))
-        z = flat.reshape(rows, w)[1:-4, 1:-1]
-        return HoughState(jnp.real(z), jnp.imag(z)), spikes
-
-    return run
-
-
-LINE_STREAMS_ONE_BY_ONE = True
-
-
-def _async_line_streams(params: HoughParams, grid: LineGrid, state: HoughState, events: Events):
-    """`_async_batch` for a line grid on a CPU: `_line_async_stream` one stream after another (``lax.map``)."""
-    run = _line_async_stream(grid)
-    batch = state.v.shape[0]
-    v_th, rate = (jnp.broadcast_to(a, (batch,)) for a in params)
-
-    def one(args):
-        v_th, rate, v, t, ev = args
-        return run(v_th, rate, v, t, ev)
-
-    return jax.lax.map(one, (v_th, rate, state.v, state.t, tuple(events)))
-
-
 def async_run(
     params: HoughParams, grid: Grid, events: Events, state: HoughState | None = None
 ) -> tuple[HoughState, jax.Array]:
@@ -523,8 +424,6 @@ def _async_streams(grid: Grid):
 
     @jax.custom_batching.custom_vmap
     def streams(params, state, events):  # a leading stream axis on every leaf
-        if LINE_STREAMS_ONE_BY_ONE and isinstance(grid, LineGrid) and jax.default_backend() == "cpu":
-            return _async_line_streams(params, grid, state, events)
         return _async_batch(params, grid, state, events)
 
     @streams.def_vmap
