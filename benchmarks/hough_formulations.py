@@ -17,10 +17,7 @@ and the ratio of each round is printed with the median over ``--rounds``.
 
 Also timed: ``LineGrid(merge_pixels=True)`` (a slot's events summed per pixel
 before voting) on the frames as they are (one event a pixel) and with every
-event twice in its slot, and, for the asynchronous mode, the batched layout
-that the line grid used before (`spikejax.vision.hough._fast._async_batch`:
-one step over event position ``i`` of every stream at once), checked to give
-the same spikes and states.
+event twice in its slot, checked to give the same accumulators.
 
 ``--baseline FILE`` adds the same rows for a one-file version of the Hough
 module, as it was before it became the package `spikejax.vision.hough`
@@ -49,7 +46,6 @@ from skimage.transform import hough_line
 from spikejax.benchmarking import JaxRun, interleaved, machine_banner
 from spikejax.commands import bench_hough
 from spikejax.vision import hough
-from spikejax.vision.hough import _fast
 
 
 def _load(path):
@@ -118,15 +114,6 @@ def main(argv=None) -> int:
         for g, name in ((hough.LineGrid(), "votes"), (merged, "votes, merge_pixels")):
             fn = jax.jit(jax.vmap(jax.vmap(lambda e, g=g: hough.line_votes(g, e))))
             sync_cands[f"{name}{label}"] = (lambda f=fn, d=data: f(d), args.batch * n_slots)
-    batched = jax.jit(
-        lambda e: _fast._async_batch(
-            params,
-            hough.LineGrid(),
-            jax.tree.map(lambda a: jnp.broadcast_to(a, e.x.shape[:1] + a.shape), hough.init(hough.LineGrid())),
-            e,
-        )
-    )
-    async_cands["async, batched layout"] = (lambda: batched(a_streams), a_events)
     modules = [("", hough)] + ([("baseline ", _load(args.baseline))] if args.baseline else [])
     fns = {}
     for label, mod in modules:
@@ -151,9 +138,6 @@ def main(argv=None) -> int:
     for label in ("", ", every event twice"):
         a, b = (np.asarray(sync_cands[f"{n}{label}"][0]()) for n in ("votes", "votes, merge_pixels"))
         print(f"merge_pixels gives the same accumulators{label}: {np.array_equal(a, b)}")
-    a, b = (async_cands[k][0]() for k in ("async", "async, batched layout"))
-    same = all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
-    print(f"the batched async layout gives the same spikes and states: {same}")
     ratios = _rounds(sync_cands, args.rounds, args.repeats)
     print(f"\n{'candidate':30s} {'ratio per round':27s} median")
     for k, r in ratios.items():
