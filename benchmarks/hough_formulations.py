@@ -15,6 +15,10 @@ and the ratio of each round is printed with the median over ``--rounds``.
   a different order and mirror image of the frames), vs the NumPy per-event
   loop of `spikejax.commands.bench_hough` (events/s).
 
+Also timed: ``LineGrid(merge_pixels=True)`` (a slot's events summed per pixel
+before voting) on the frames as they are (one event a pixel) and with every
+event twice in its slot, checked to give the same accumulators.
+
 ``--baseline FILE`` adds the same rows for a one-file version of the Hough
 module, as it was before it became the package `spikejax.vision.hough`
 (``git show 575fe44:spikejax/vision/hough.py > /tmp/old_hough.py``), and
@@ -104,6 +108,12 @@ def main(argv=None) -> int:
 
     sync_cands = {"skimage hough_line": (lambda: [hough_line(im, thetas) for im in images], len(images))}
     async_cands = {}
+    merged = hough.LineGrid(merge_pixels=True)
+    twice = jax.tree.map(lambda a: jnp.concatenate([a, a], axis=-1), streams)
+    for label, data in (("", streams), (", every event twice", twice)):
+        for g, name in ((hough.LineGrid(), "votes"), (merged, "votes, merge_pixels")):
+            fn = jax.jit(jax.vmap(jax.vmap(lambda e, g=g: hough.line_votes(g, e))))
+            sync_cands[f"{name}{label}"] = (lambda f=fn, d=data: f(d), args.batch * n_slots)
     modules = [("", hough)] + ([("baseline ", _load(args.baseline))] if args.baseline else [])
     fns = {}
     for label, mod in modules:
@@ -125,6 +135,9 @@ def main(argv=None) -> int:
             same = [np.array_equal(a, b) for a, b in zip(jax.tree.leaves(new(arg)), jax.tree.leaves(old(arg)))]
             print(f"same results as the baseline ({['votes', 'sync', 'async'][i]}): {all(same)}")
 
+    for label in ("", ", every event twice"):
+        a, b = (np.asarray(sync_cands[f"{n}{label}"][0]()) for n in ("votes", "votes, merge_pixels"))
+        print(f"merge_pixels gives the same accumulators{label}: {np.array_equal(a, b)}")
     ratios = _rounds(sync_cands, args.rounds, args.repeats)
     print(f"\n{'candidate':30s} {'ratio per round':27s} median")
     for k, r in ratios.items():

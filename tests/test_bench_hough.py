@@ -49,6 +49,11 @@ def test_bench_writes_every_implementation(tmp_path):
             "1 device" if r["implementation"].startswith("spikejax") else "1 process",
         )
         assert float(r["x_peer"]) > 0
+        if r["shape"] == "line" and r["mode"] != "async":  # the ratio to OpenCV's HoughLines, same cores
+            opencv = next(o for o in rows if o["implementation"] == "OpenCV HoughLines")
+            assert np.isclose(float(r["x_opencv"]), float(r["frames_per_s"]) / float(opencv["frames_per_s"]))
+        else:
+            assert r["x_opencv"] == "nan"
     sync_line = next(r for r in rows if r["mode"] == "sync" and r["shape"] == "line")
     assert int(sync_line["frames"]) == bench_hough.N_FRAMES
     assert (tmp_path / "hough.png").stat().st_size > 0

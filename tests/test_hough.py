@@ -1,6 +1,7 @@
 """Spiking Hough grids: accumulators against brute force and scikit-image, Alg. 1 by hand, the fast path
 against the readable reference (`hough.neuron`) and the NumPy oracle (`hough.reference`)."""
 
+import dataclasses
 import math
 
 import jax
@@ -66,6 +67,39 @@ def test_line_votes_equal_brute_force():
                 if ok and j is not None:
                     expected[k, j] += p
         np.testing.assert_array_equal(np.asarray(hough.line_votes(grid, ev)), expected)
+
+
+def test_merged_pixel_votes_equal_the_event_votes():
+    # 1,200 events on 40 pixels (a few off the sensor, a tenth invalid): pixels
+    # repeat ~30 times and many cancel, and the merged votes fill one of the
+    # three chunks, so the other two are skipped.
+    grid = hough.LineGrid(width=12, height=10, n_theta=30, n_rho=25, merge_pixels=True)
+    plain = dataclasses.replace(grid, merge_pixels=False)
+    rng = np.random.default_rng(7)
+    n = 1200
+    pix = rng.integers(0, 40, n)
+    x, y = pix % 8 + 3, pix // 8 * 2
+    x[:5] = -1  # off the sensor: no votes
+    ev = _events(x, y, np.sort(rng.random(n)), rng.choice([-1, 1], n), rng.random(n) < 0.9)
+    for signed in (True, False):
+        expected = np.zeros(grid.shape)
+        for xi, yi, p, ok in zip(*(np.asarray(a) for a in (ev.x, ev.y, ev.p, ev.valid))):
+            for k in range(grid.n_theta):
+                j = _line_cell(grid, xi, yi, k) if 0 <= xi < grid.width else None
+                if ok and j is not None:
+                    expected[k, j] += p if signed else 1
+        merged = np.asarray(hough.line_votes(grid, ev, signed=signed))
+        np.testing.assert_array_equal(merged, expected)
+        np.testing.assert_array_equal(merged, np.asarray(hough.line_votes(plain, ev, signed=signed)))
+    assert np.abs(expected).sum() > 0
+    # The whole synchronous detector, two streams of four slots: the same spikes and states.
+    params = hough.hough_params(v_th=6.0, decay=3.0)
+    slots = jax.tree.map(lambda a: a.reshape(2, 4, 150), ev)
+    times = jnp.arange(1.0, 5.0) / 4
+    run = lambda g: jax.jit(jax.vmap(lambda e: hough.sync_run(params, g, e, times)))(slots)  # noqa: E731
+    ours = run(grid)
+    assert np.abs(np.asarray(ours[1])).sum() > 10
+    _assert_trees_equal(ours, run(plain))
 
 
 def test_line_votes_equal_skimage_hough_line():
@@ -245,6 +279,8 @@ def test_async_nested_vmap_and_batched_params_like_single_streams():
 def test_bad_grids_are_refused():
     with pytest.raises(UserError, match="n_theta"):
         hough.LineGrid(n_theta=0)
+    with pytest.raises(UserError, match="merge_pixels"):
+        hough.LineGrid(merge_pixels="yes")
     with pytest.raises(UserError, match="r_min"):
         hough.CircleGrid(r_min=0.0)
     with pytest.raises(UserError, match="method"):

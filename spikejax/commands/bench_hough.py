@@ -55,13 +55,17 @@ and why these won:
   ~13,000 ring cells is 100x more work.
 * Async: one ``lax.scan`` over event positions for the whole batch; each step
   gathers the ``(v, t_last)`` of the 180 cells of event ``i`` of every stream
-  from a flat state of all streams' grids, decays them lazily and writes them
-  back by one scatter-add of the change (XLA updates in place after a gather
-  for an add, but copies for a set); inhibition runs in a ``lax.cond`` only on
-  steps where some stream fired, its fired cells packed to the front and
-  visited 8 per stream at a time. Running the streams one after another
-  (``lax.map``, one event a step, as before) is 1.4-1.7x slower: each step is
-  a dozen small XLA operations, about 4 us an event whatever their size.
+  (one complex64 a cell) from a flat state of all streams' grids, decays them
+  lazily and writes them back by one scatter-add of the change (XLA updates in
+  place after a gather for an add, but copies for a set); inhibition runs in a
+  ``lax.cond`` only on steps where some stream fired, its fired cells taken 12
+  per stream at a time from their mask packed as bits. Running the streams one
+  after another, each grid kept in the cache (a padded complex64 grid, the fired
+  cells packed by a cumulative sum), was up to 1.3x faster on a quiet machine on
+  one device and 0.75-1.0x on two devices under load: not kept.
+* Sync, ``LineGrid(merge_pixels=True)``: a slot's events summed per pixel
+  before voting (the same accumulator); not the default, since the bench
+  frames have one event a pixel.
 """
 
 from __future__ import annotations
@@ -122,6 +126,7 @@ COLUMNS = [
     "parallel",
     "peer",
     "x_peer",
+    "x_opencv",
 ]
 
 
@@ -200,6 +205,9 @@ PEERS = (
     ("circle", "OpenCV HoughCircles", "per frame"),
     ("line", "NumPy per-event loop", "async"),
 )
+# The OpenCV peer of the line rows, sync and per frame (accumulator and peak search): `x_opencv`.
+# (OpenCV's HoughCircles is another algorithm, edge gradients voting for centres, so circle rows have none.)
+OPENCV_PEER = {"line": "OpenCV HoughLines"}
 # The peer every row's ratio is taken to, by (shape, mode).
 RATIO_PEER = {
     ("line", "sync"): "skimage hough_line",
@@ -394,6 +402,14 @@ def run(
     add_ratios(
         rows, "x_peer", "frames_per_s", lambda p, r: p["implementation"].startswith(RATIO_PEER[r["shape"], r["mode"]])
     )
+    add_ratios(
+        rows,
+        "x_opencv",
+        "frames_per_s",
+        lambda p, r: r["shape"] == "line"
+        and r["mode"] != "async"
+        and p["implementation"].startswith(OPENCV_PEER["line"]),
+    )
     for r in rows:  # async: a frame is a stream's one slot, the peer's too, so the ratio is that of events/s
         r["peer"] = RATIO_PEER[r["shape"], r["mode"]]
 
@@ -446,7 +462,8 @@ def _print(rows: list[dict], n_dev: int) -> None:
             f"{r['frames_per_s']:10.1f} {r['events_per_s'] / 1e6:10.3f} {r['x_peer']:7.2f}"
         )
     print(
-        "(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; async in events/s)"
+        "(x peer: against skimage hough_line / hough_circle or the NumPy loop given the same cores; async in events/s;\n"
+        " x_opencv in hough.csv: line rows against OpenCV HoughLines given the same cores)"
     )
     print("\nmeasured in this run (ratios to the peer on the same frames and cores; the best row):")
     for cores in sorted({1, n_dev}):
@@ -471,9 +488,10 @@ def _print(rows: list[dict], n_dev: int) -> None:
                 if unit == "frames"
                 else f"{best['events_per_s'] / 1e6:.3f} M events/s"
             )
+            opencv = "" if np.isnan(best["x_opencv"]) else f", {best['x_opencv']:.2f} x {OPENCV_PEER[shape]}"
             print(
                 f"  {shape}, {mode}, {cores} core{'s' if cores > 1 else ''}: {rate} at batch {best['batch']} = "
-                f"{best['x_peer']:.2f} x {best['peer']} ({best['parallel']} against "
+                f"{best['x_peer']:.2f} x {best['peer']}{opencv} ({best['parallel']} against "
                 f"{cores_label(cores, 'process')})"
             )
     print("\nTable 1 of the paper (whole pipe tracker, frames/s):")

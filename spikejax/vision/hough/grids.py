@@ -40,6 +40,13 @@ class LineGrid:
             ``(width / 2, height / 2)``: then ``|rho| <= 90`` on a 128 x 128
             sensor and the paper's 180 bins of 1 pixel hold every line.
         rho_offset: bin of ``rho = 0``; default ``n_rho // 2``.
+        merge_pixels: how the votes are computed, not what they are: sum a
+            slot's events per pixel (signed by polarity) before voting, so that
+            each active pixel votes once with its total and pixels whose events
+            cancel do not vote. The accumulator is linear in the events, so it
+            is the same, exactly. Pays when pixels repeat within a slot (long
+            slots of a real sensor); costs ~10 % when every event has a pixel
+            of its own (docs/BENCHMARKS.md, "Spiking Hough detectors").
 
     Votes that fall outside the bins are dropped (with the defaults on a
     128 x 128 sensor only the corner pixel ``(0, 0)`` at 44-46 degrees, where
@@ -53,8 +60,11 @@ class LineGrid:
     rho_step: float = 1.0
     origin: tuple[float, float] | None = None
     rho_offset: int | None = None
+    merge_pixels: bool = False
 
     def __post_init__(self):
+        if not isinstance(self.merge_pixels, (bool, np.bool_)):
+            raise UserError(f"LineGrid.merge_pixels must be True or False, not {self.merge_pixels!r}")
         for name in ("width", "height", "n_theta", "n_rho"):
             value = getattr(self, name)
             if not (isinstance(value, (int, np.integer)) and value > 0):
