@@ -10,7 +10,7 @@ import pytest
 from robots.snake import camera as cam
 from robots.snake import pipes
 from robots.snake.gait import gait_params, joint_targets
-from robots.snake.physics import forward_kinematics, make_physics, start_at
+from robots.snake.physics import PIPE_GROUP, forward_kinematics, make_physics, start_at
 from spikejax.errors import UserError
 from spikejax.vision import render
 
@@ -316,3 +316,76 @@ def test_pipe_scene_has_no_target_sphere_and_shows_the_pipe():
     t = pipes.truth(jnp.array([0.0, 0.0, 0.0305]), jnp.eye(3), scene, camera)
     col = int(t.pos[0])
     assert img[5, col] < 0.1 < cam.SKY_BRIGHTNESS - 0.1 < img[5, (col + 32) % 64]
+
+
+@pytest.mark.slow
+def test_mjx_backend_takes_the_pipes_and_stops_at_a_standing_one():
+    """The MJX model of the same pipe world (compile about 80 s on 2 cores, hence slow).
+
+    The standing pipe 0.55 m ahead of the head: in both backends the head comes
+    to the surface and stays out of the solid; over the first 0.4 s (no pipe
+    contact yet) the heads agree within 1 cm, the tolerance of
+    ``tests/test_snake_physics.py`` for MJX against C.
+    """
+    scene = pipes.sample(jax.random.key(0), pipes.STANDING, pipes.LEFT)._replace(xy=jnp.array([[0.55, 0.0]]))
+    heads = {}
+    for backend in ("mjx", "mujoco"):
+        phys = make_physics(backend, pipes=pipes.default_bodies(1), nthread=1)
+        state = pipes.place_pipes(start_at(phys.init(), 0.0, 0.0, 0.0), scene)
+        heads[backend] = np.asarray(jax.jit(lambda s, phys=phys: _crawl(phys, s, 300))(state)[0])
+    np.testing.assert_allclose(heads["mjx"][:20], heads["mujoco"][:20], atol=1e-2)
+    for head in heads.values():
+        surface = np.hypot(head[:, 0] - 0.55, head[:, 1]) - 0.125
+        assert -0.01 < surface.min() < 0.05
+
+
+def test_start_at_moves_the_snake_rigidly():
+    phys = make_physics("mujoco", nthread=1)
+    rest = phys.init()
+    moved = start_at(rest, 1.0, -2.0, 0.5)
+    np.testing.assert_allclose(moved.head_pos[:2], [1.0, -2.0], atol=1e-6)
+    assert math.atan2(float(moved.head_mat[1, 0]), float(moved.head_mat[0, 0])) == pytest.approx(0.5, abs=1e-6)
+    a, b = forward_kinematics(rest.qpos)[0][1:], forward_kinematics(moved.qpos)[0][1:]
+    pair = lambda x: np.linalg.norm(x[:, None] - x[None], axis=-1)  # noqa: E731
+    np.testing.assert_allclose(pair(np.asarray(b)), pair(np.asarray(a)), atol=1e-5)
+    np.testing.assert_array_equal(moved.qpos[7:], rest.qpos[7:])
+
+
+def test_physical_pipes_stand_where_the_camera_draws_them(pipe_physics):
+    """mj_ray on the placed MuJoCo bodies against the renderer's pipes.
+
+    The standing pipe is the same cylinder; the lying one's 16 staves are an
+    inscribed polygon of the drawn wall, whose corners stand out by
+    ``0.26 / cos(pi / 16) - 0.26``, 5.1 mm, beyond the drawn surface: every
+    point where a ray meets a physical pipe is within 6 mm of the drawn solid.
+    """
+    import mujoco
+
+    model = pipe_physics.mj_model
+    data = mujoco.MjData(model)
+    for kind, xy, yaw in [(pipes.STANDING, (2.0, 0.5), 0.0), (pipes.LYING, (2.5, -0.4), math.radians(160.0))]:
+        scene = pipes.sample(jax.random.key(0), kind, pipes.LEFT)._replace(xy=jnp.array([xy]), yaw=jnp.array([yaw]))
+        state = pipes.place_pipes(pipe_physics.init(), scene)
+        data.mocap_pos[:], data.mocap_quat[:] = np.asarray(state.mocap_pos), np.asarray(state.mocap_quat)
+        mujoco.mj_forward(model, data)
+        world = cam.pipe_scene(pipes.render_pipes(scene))._replace(ground_height=-100.0)
+        origin = np.array([0.0, 0.0, 0.2])
+        rng = np.random.default_rng(int(kind))
+        target = np.array([*xy, 0.25]) + rng.uniform(-0.25, 0.25, (200, 3)) * [1, 1, 0.8]
+        if kind == pipes.LYING:  # rays into the bore as well as onto the wall and the entry face
+            target = target + np.outer(rng.uniform(0, 2.0, 200), [math.cos(yaw + math.pi), math.sin(yaw + math.pi), 0])
+        dirs = target - origin
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        t, _ = render.intersect(world, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+        t = np.where(np.asarray(t) > 50.0, -1.0, np.asarray(t))
+        geom = np.zeros(1, np.int32)
+        groups = np.zeros(6, np.uint8)
+        groups[PIPE_GROUP] = 1  # the pipes only: not the floor, not the snake
+        exp = np.array([mujoco.mj_ray(model, data, origin, d, groups, 1, -1, geom) for d in dirs])
+        both = (exp > 0) & (t > 0)
+        assert both.sum() > 80 and np.mean((exp > 0) == (t > 0)) > 0.95
+        hit = origin + exp[exp > 0, None] * dirs[exp > 0]
+        gap = np.asarray(pipes.clearance(jnp.asarray(hit, jnp.float32), jnp.zeros(len(hit)), scene))[:, 0]
+        assert np.abs(gap).max() < (1e-4 if kind == pipes.STANDING else 0.006)
+        if kind == pipes.STANDING:
+            np.testing.assert_allclose(t[both], exp[both], atol=1e-4)

@@ -173,10 +173,12 @@ def test_camera_is_static_configuration():
 
 
 def _tube_mesh_xml(radius, wall, length, pos, yaw, n=256):
-    """MJCF of a lying pipe as a mesh of ``n`` facets a surface: outer wall, bore, entry face, far cap.
+    """MJCF of a lying pipe as a mesh of ``n`` facets a surface: outer wall, bore, entry face, far plug.
 
-    The entry face is at the mesh origin, the bore runs along +x. mj_ray casts against a mesh's triangles,
-    so this is the renderer's pipe up to the facets (a chord error of radius * (1 - cos(pi / n)), 2e-5 m).
+    The entry face is at the mesh origin, the bore runs along +x to the plug's inner face at
+    ``length - wall``; the plug's outer face closes the tube at ``length``. mj_ray casts against a
+    mesh's triangles, so this is the renderer's pipe up to the facets (a chord error of
+    radius * (1 - cos(pi / n)), 2e-5 m).
     """
     ang = 2 * np.pi * np.arange(n) / n
     c, s = np.cos(ang), np.sin(ang)
@@ -184,18 +186,18 @@ def _tube_mesh_xml(radius, wall, length, pos, yaw, n=256):
     def ring(r, x):
         return np.stack([np.full(n, x), r * c, r * s], 1)
 
-    inner = radius - wall
+    inner, end = radius - wall, length - wall
     verts = np.concatenate(
-        [ring(radius, 0), ring(radius, length), ring(inner, 0), ring(inner, length), [[length, 0, 0]]]
+        [ring(radius, 0), ring(radius, length), ring(inner, 0), ring(inner, end), [[end, 0, 0], [length, 0, 0]]]
     )
-    oe, of, ie, fi, fc = 0, n, 2 * n, 3 * n, 4 * n
+    oe, of, ie, fi, fc, bc = 0, n, 2 * n, 3 * n, 4 * n, 4 * n + 1
     faces = []
     for k in range(n):
         j = (k + 1) % n
         faces += [[oe + k, of + k, of + j], [oe + k, of + j, oe + j]]  # outer wall
         faces += [[ie + k, ie + j, fi + j], [ie + k, fi + j, fi + k]]  # bore
         faces += [[oe + k, oe + j, ie + j], [oe + k, ie + j, ie + k]]  # entry face
-        faces += [[of + k, fc, of + j]]  # far cap
+        faces += [[fi + k, fi + j, fc], [of + k, bc, of + j]]  # the plug's inner and outer faces
     vert = " ".join(f"{v:.9g}" for v in verts.ravel())
     face = " ".join(map(str, np.ravel(faces)))
     return f"""<mujoco><compiler angle="radian"/>

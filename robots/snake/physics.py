@@ -87,6 +87,8 @@ __all__ = [
     "TUNED_DT",
     "TUNED_ITERATIONS",
     "TUNED_LS_ITERATIONS",
+    "PARK_DEPTH",
+    "PIPE_GROUP",
     "PhysState",
     "PipeBodies",
     "PipeSlot",
@@ -195,6 +197,7 @@ class PipeBodies:
 
 
 PARK_DEPTH = -50.0  # m: unused pipe bodies wait this far below the floor
+PIPE_GROUP = 1  # geom group of the pipes (the snake and the floor are in group 0)
 
 
 def _add_pipes(spec, bodies: PipeBodies, settings: str) -> None:
@@ -241,6 +244,7 @@ def _add_pipes(spec, bodies: PipeBodies, settings: str) -> None:
             geom.condim = 3
             geom.friction = friction
             geom.rgba = [0.1, 0.1, 0.1, 1.0]
+            geom.group = PIPE_GROUP
 
 
 @functools.cache

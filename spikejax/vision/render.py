@@ -179,7 +179,9 @@ def pipe_primitives(pipes: Pipes) -> tuple[Cylinders, Annuli]:
     Returns ``Cylinders`` of ``2 n`` tubes (outer walls, then bores) and
     ``Annuli`` of ``2 n`` rings (entry faces, then far caps). A hidden pipe
     gets a negative half length and outer radius (never hit); a solid pipe
-    (``wall >= radius``) has no bore, and its entry face is a disc.
+    (``wall >= radius``) has no bore, and its entry face is a disc. The far
+    cap is a ``wall`` thick plug: its disc is drawn at the bore's end,
+    ``length - wall`` from the entry, the face seen from inside.
     """
     n = pipes.radius.shape[0]
     valid = jnp.asarray(pipes.valid, bool)
@@ -197,7 +199,7 @@ def pipe_primitives(pipes: Pipes) -> tuple[Cylinders, Annuli]:
         jnp.concatenate([pipes.brightness, pipes.inner_brightness]),
         jnp.concatenate([pipes.brightness, pipes.inner_brightness]),
     )
-    far = pipes.entry + pipes.length[:, None] * pipes.axis
+    far = pipes.entry + (pipes.length - jnp.minimum(pipes.wall, pipes.length))[:, None] * pipes.axis
     outer = jnp.where(valid, pipes.radius, hidden)
     ann = Annuli(
         jnp.concatenate([pipes.entry, far]),
