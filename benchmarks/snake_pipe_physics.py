@@ -17,6 +17,12 @@ The three are interleaved (`spikejax.benchmarking.interleaved`), best of
 ``--rounds``; compile time is reported apart. Figures: physics control steps
 (20 ms of simulated time each) per second, all snakes together.
 
+A second table times MuJoCo's C engine alone on the same three models
+(``mujoco.rollout`` on a pool of one thread per core, the gait's servo
+targets computed beforehand and, for the piped models, the pipes' mocap
+poses in the control vector), which isolates what the contacts cost from the
+callback's overhead.
+
 Usage::
 
     .venv/bin/python benchmarks/snake_pipe_physics.py --batch 1 64 256 --steps 250 --rounds 3
@@ -27,6 +33,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import time
 
 import jax
 import jax.numpy as jnp
@@ -66,6 +73,56 @@ def _rollout(phys, n_steps, placed: bool):
     return jax.vmap(episode)
 
 
+def _c_rates(batch: int, n_steps: int, rounds: int, nthread: int) -> dict[str, float]:
+    """Control steps/s of ``mujoco.rollout`` alone for the three models (see the module docstring)."""
+    import numpy as np
+    from mujoco import rollout
+
+    from robots.snake.physics import TUNED_DT, joint_qpos_index, load_mj_model
+
+    substeps = round(0.02 / TUNED_DT)
+    gait = gait_params()
+    times = jnp.arange(n_steps, dtype=jnp.float32) * 0.02
+    targets = np.asarray(jax.vmap(lambda t: joint_targets(gait, t, 0.0, 0.0, True))(times), np.float64)
+    ctrl = np.repeat(targets, substeps, axis=0)  # (n_steps * substeps, 16)
+    scenes = _scenes(batch)
+    runs = {}
+    pool = rollout.Rollout(nthread=nthread)
+    for name in ("alone", "parked", "contact"):
+        model = load_mj_model() if name == "alone" else load_mj_model(pipes=pipes.default_bodies(1))
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        data = mujoco.MjData(model)
+        state0 = np.empty(mujoco.mj_stateSize(model, spec))
+        mujoco.mj_getState(model, data, state0, spec)
+        assert np.all(joint_qpos_index(model) > 6)
+        control_spec = mujoco.mjtState.mjSTATE_CTRL
+        control = np.broadcast_to(ctrl, (batch,) + ctrl.shape)
+        if name != "alone":
+            control_spec |= mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+            init = make_physics("mujoco", pipes=pipes.default_bodies(1), nthread=1).init()
+            if name == "contact":
+                placed = jax.vmap(lambda sc: pipes.place_pipes(init, sc))(scenes)
+                pos, quat = np.asarray(placed.mocap_pos), np.asarray(placed.mocap_quat)
+            else:
+                pos = np.broadcast_to(np.asarray(init.mocap_pos), (batch, model.nmocap, 3))
+                quat = np.broadcast_to(np.asarray(init.mocap_quat), (batch, model.nmocap, 4))
+            mocap = np.concatenate([pos.reshape(batch, -1), quat.reshape(batch, -1)], axis=1)
+            mocap = np.broadcast_to(mocap[:, None, :], (batch, ctrl.shape[0], mocap.shape[1]))
+            control = np.concatenate([control, mocap], axis=2)
+        control = np.ascontiguousarray(control)
+        initial = np.ascontiguousarray(np.broadcast_to(state0, (batch, state0.size)))
+        datas = [mujoco.MjData(model) for _ in range(nthread)]
+
+        def run(model=model, datas=datas, initial=initial, control=control, control_spec=control_spec):
+            t0 = time.perf_counter()
+            pool.rollout([model] * batch, datas, initial, control, control_spec=int(control_spec))
+            return time.perf_counter() - t0
+
+        runs[name] = run
+    best = benchmarking.interleaved(runs, rounds)
+    return {name: batch * n_steps / seconds for name, seconds in best.items()}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch", type=int, nargs="+", default=[1, 64, 256])
@@ -88,6 +145,12 @@ def main(argv=None) -> None:
             rate = batch * args.steps / seconds
             ratio = best["alone"] / seconds
             print(f"{batch:>6} {name:>8} {rate:>10.0f} {ratio:>9.2f} {compile_s[name]:>10.1f}")
+    print("MuJoCo C alone (mujoco.rollout):")
+    print(f"{'batch':>6} {'model':>8} {'steps/s':>10} {'vs alone':>9}")
+    for batch in args.batch:
+        rates = _c_rates(batch, args.steps, args.rounds, nthread)
+        for name, rate in rates.items():
+            print(f"{batch:>6} {name:>8} {rate:>10.0f} {rate / rates['alone']:>9.2f}")
 
 
 if __name__ == "__main__":

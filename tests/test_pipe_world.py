@@ -51,6 +51,11 @@ def test_scene_file_loads_into_fixed_slots(tmp_path):
     np.testing.assert_allclose(scene.yaw[1], math.radians(160.0), rtol=1e-6)
     np.testing.assert_allclose(scene.ring_brightness[:2], [pipes.STANDING_BRIGHTNESS[2], 0.7])
     assert scene.start.shape == (3,) and scene.capacity == 3
+    # The physical bodies take the file's sizes, slot by slot.
+    model = make_physics("mujoco", pipes=pipes.bodies_for(scene), nthread=1).mj_model
+    np.testing.assert_allclose(model.geom("pipe0_standing").size[:2], [0.125, 1.0])
+    np.testing.assert_allclose(model.geom("pipe1_cap").size[:2], [0.26, 0.005])
+    assert model.nmocap == 6
     # Scenes of different contents have one pytree structure and shape: they stack and vmap.
     other = pipes.sample(jax.random.key(0), pipes.LYING, pipes.LEFT, capacity=3)
     assert jax.tree.structure(other) == jax.tree.structure(scene)
@@ -137,6 +142,10 @@ def render_fields(scene):
 
 CAMERA = render.Camera(width=96, height=64, supersample=4)
 _render = jax.jit(render.render, static_argnames="camera")
+_truth = jax.jit(pipes.truth, static_argnames="camera")
+_entered = jax.jit(pipes.entered)
+_reached = jax.jit(pipes.reached)
+_clearance = jax.jit(pipes.clearance)
 
 
 @pytest.mark.parametrize("yaw_deg, lateral", [(0.0, 0.3), (12.0, -0.5)])
@@ -147,7 +156,7 @@ def test_standing_pipe_edges_and_width_match_the_rendered_silhouette(yaw_deg, la
     pos = jnp.array([0.1, 0.05, 0.0305])
     rot = jnp.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
     img = np.asarray(_render(_flat(scene), pos, rot, CAMERA))
-    t = pipes.truth(pos, rot, scene, CAMERA)
+    t = _truth(pos, rot, scene, CAMERA)
     # A vertical tube seen by a level camera: both silhouette edges are vertical lines; the rows above
     # the horizon show the pipe against the sky, so each row's coverage is the width, its moments the edges.
     cover = 1.0 - img[5:25]
@@ -173,7 +182,7 @@ def test_lying_entry_ring_centre_and_radius_match_the_rendered_entry():
     scene = pipes.sample(jax.random.key(2), pipes.LYING, pipes.LEFT)
     scene = scene._replace(xy=jnp.array([[2.0, 0.0]]), yaw=jnp.array([math.pi]))
     pos, rot = jnp.array([0.0, 0.0, 0.26]), jnp.eye(3)
-    t = pipes.truth(pos, rot, scene, CAMERA)
+    t = _truth(pos, rot, scene, CAMERA)
     scene_img = _flat(scene)._replace(ground_height=-100.0)
     cover = 1.0 - np.asarray(_render(scene_img, pos, rot, CAMERA))
     rows, cols = np.mgrid[: CAMERA.height, : CAMERA.width] + 0.5
@@ -205,7 +214,7 @@ def test_lying_entry_ring_centre_and_radius_match_the_rendered_entry():
         CAMERA,
     )
     cover = 1.0 - np.asarray(img)
-    t = pipes.truth(pos, rot, scene, CAMERA)
+    t = _truth(pos, rot, scene, CAMERA)
     col = int(t.ring_col[0])
     column = cover[:, col]
     top, bottom = np.nonzero(column > 0.5)[0][[0, -1]]
@@ -228,7 +237,7 @@ def test_predicates_on_hand_placed_heads():
     # Standing: 0.3 m from the surface is reached (horizontal distance to the axis 0.425), 0.31 m is not.
     for gap, want in [(0.29, True), (0.31, False)]:
         head = jnp.array([3.0 - 0.125 - gap, 2.0, 0.03])
-        np.testing.assert_array_equal(pipes.reached(head, scene), [want, False, False])
+        np.testing.assert_array_equal(_reached(head, scene), [want, False, False])
     # Lying: the entry plane is x = 0 facing -x, the bore (radius 0.25, margin 0.05) runs along +x at z = 0.26.
     looking_out = jnp.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
     cases = [
@@ -245,12 +254,12 @@ def test_predicates_on_hand_placed_heads():
         c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
         cases.append(((0.5, 0.0, 0.05), jnp.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), want))
     for head, mat, want in cases:
-        inside = pipes.entered(jnp.array(head), mat, scene)
+        inside = _entered(jnp.array(head), mat, scene)
         assert bool(inside[1]) == want and not bool(inside[0]) and not bool(inside[2]), (head, want)
-    assert bool(pipes.reached(jnp.array([-0.29, 0.0, 0.26]), scene)[1])
+    assert bool(_reached(jnp.array([-0.29, 0.0, 0.26]), scene)[1])
     # Clearance: hand-computed gaps to the standing solid and the lying wall (radius 0.26, bore 0.25).
     points = jnp.array([[3.5, 2.0, 1.0], [3.0, 2.0, 2.5], [1.0, 0.0, 0.26 + 0.4], [1.0, 0.0, 0.26 + 0.1]])
-    gap = np.asarray(pipes.clearance(points, jnp.full(4, 0.03), scene))
+    gap = np.asarray(_clearance(points, jnp.full(4, 0.03), scene))
     np.testing.assert_allclose(gap[:2, 0], [0.5 - 0.125 - 0.03, 0.5 - 0.03], atol=1e-6)  # beside, above the top
     np.testing.assert_allclose(gap[2:, 1], [0.4 - 0.26 - 0.03, 0.25 - 0.1 - 0.03], atol=1e-6)  # outside, in the bore
     assert np.all(np.isinf(gap[:, 2]))
@@ -261,50 +270,66 @@ def pipe_physics():
     return make_physics("mujoco", pipes=pipes.default_bodies(1), nthread=1)
 
 
-def _crawl(phys, state, n_steps):
+def _crawl(phys, state, n_steps, scene=None):
+    """``n_steps`` of the straight gait; per step the head, its frame and, given ``scene``, the truth."""
     gait = gait_params()
 
     def body(s, _):
         s = phys.step(s, joint_targets(gait, s.time, 0.0, 0.0, True))
-        return s, (s.head_pos, s.head_mat, s.qpos)
+        out = (s.head_pos, s.head_mat, s.qpos)
+        if scene is not None:
+            gap = pipes.clearance(forward_kinematics(s.qpos)[0][1:], jnp.zeros(17), scene)
+            out += (
+                pipes.collided(s.qpos, scene),
+                pipes.collided(s.qpos, scene, -0.01),
+                jnp.min(gap, axis=0),
+                pipes.entered(s.head_pos, s.head_mat, scene),
+            )
+        return s, out
 
     return jax.lax.scan(body, state, None, length=n_steps)[1]
 
 
-def test_parked_pipes_leave_the_snake_as_it_was(pipe_physics):
-    alone = make_physics("mujoco", nthread=1)
-    assert alone.init().mocap_pos.shape == (0, 3)
-    a = jax.jit(lambda: _crawl(alone, alone.init(), 50))()[2]
-    b = jax.jit(lambda: _crawl(pipe_physics, pipe_physics.init(), 50))()[2]
-    np.testing.assert_array_equal(a, b)
-
-
-def test_snake_collides_with_a_standing_pipe_and_crawls_into_a_lying_one(pipe_physics):
-    phys = pipe_physics
-    # One compiled program for both episodes: the scenes differ only in traced data.
+@pytest.fixture(scope="module")
+def crawls(pipe_physics):
+    """Three episodes in one program (the scenes differ only in traced data): a standing pipe 0.55 m
+    ahead of the head, a lying pipe's entry 0.35 m ahead facing the snake, no pipe; and the snake
+    alone (the model without pipes) on the same batch."""
     standing = pipes.sample(jax.random.key(0), pipes.STANDING, pipes.LEFT)._replace(xy=jnp.array([[0.55, 0.0]]))
     lying = pipes.sample(jax.random.key(0), pipes.LYING, pipes.LEFT)
     lying = lying._replace(xy=jnp.array([[0.35, 0.0]]), yaw=jnp.array([math.pi]))
-    scenes = jax.tree.map(lambda a, b: jnp.stack([a, b]), standing, lying)
+    empty = standing._replace(valid=jnp.array([False]))
+    scenes = jax.tree.map(lambda *a: jnp.stack(a), standing, lying, empty)
 
     def episode(scene):
-        state = pipes.place_pipes(start_at(phys.init(), 0.0, 0.0, 0.0), scene)
-        return _crawl(phys, state, 450)
+        start = start_at(pipe_physics.init(), 0.0 * scene.xy[0, 0], 0.0, 0.0)  # batched like the scene
+        return _crawl(pipe_physics, pipes.place_pipes(start, scene), 450, scene)
 
-    head, mat, qpos = jax.jit(jax.vmap(episode))(scenes)
+    alone = make_physics("mujoco", nthread=1)
+    assert alone.init().mocap_pos.shape == (0, 3)
+
+    def episode_alone(scene):
+        return _crawl(alone, start_at(alone.init(), 0.0 * scene.xy[0, 0], 0.0, 0.0), 60)
+
+    return jax.jit(jax.vmap(episode))(scenes), jax.jit(jax.vmap(episode_alone))(scenes)
+
+
+def test_parked_pipes_leave_the_snake_as_it_was(crawls):
+    (_, _, qpos, *_), (_, _, qpos_alone) = crawls
+    np.testing.assert_array_equal(qpos[2, :60], qpos_alone[2])
+
+
+def test_snake_collides_with_a_standing_pipe_and_crawls_into_a_lying_one(crawls):
+    (head, _, _, touch, deep, gap, inside), _ = crawls
     # Standing pipe on the path: the head is stopped and deflected, never inside the solid.
-    s0 = jax.tree.map(lambda x: x[0], scenes)
     surface = np.hypot(head[0, :, 0] - 0.55, head[0, :, 1]) - 0.125
     assert surface.min() > -0.01 and surface.min() < 0.05
-    hits = jax.vmap(lambda q: pipes.collided(q, s0))(qpos[0])
-    assert bool(jnp.any(hits))
-    gaps = jax.vmap(lambda q: pipes.clearance(forward_kinematics(q)[0][1:], jnp.full(17, 0.0), s0))(qpos[0])
-    assert float(jnp.min(gaps)) > -0.03  # no module centre deeper than its radius
-    # Lying pipe: the head passes the entry plane and is inside the bore, by `entered`.
-    s1 = jax.tree.map(lambda x: x[1], scenes)
-    inside = jax.vmap(lambda h, m: pipes.entered(h, m, s1))(head[1], mat[1])[:, 0]
-    assert bool(inside[-1]) and float(head[1, -1, 0]) > 0.35 + 0.2
-    assert not bool(jnp.any(jax.vmap(lambda q: pipes.collided(q, s1, -0.01))(qpos[1])))
+    assert bool(jnp.any(touch[0, :, 0])) and not bool(jnp.any(touch[2]))
+    assert float(jnp.min(gap[0, :, 0])) > -0.03  # no module centre deeper than its radius
+    # Lying pipe: the head passes the entry plane and is inside the bore, by `entered`, touching no wall
+    # deeper than 1 cm.
+    assert bool(inside[1, -1, 0]) and float(head[1, -1, 0]) > 0.35 + 0.2 and not bool(jnp.any(inside[0]))
+    assert not bool(jnp.any(deep[1]))
 
 
 def test_pipe_scene_has_no_target_sphere_and_shows_the_pipe():
@@ -313,7 +338,7 @@ def test_pipe_scene_has_no_target_sphere_and_shows_the_pipe():
     assert world.spheres.center.shape == (0, 3)
     camera = render.Camera(width=64, height=32)
     img = np.asarray(_render(world, jnp.array([0.0, 0.0, 0.0305]), jnp.eye(3), camera))
-    t = pipes.truth(jnp.array([0.0, 0.0, 0.0305]), jnp.eye(3), scene, camera)
+    t = _truth(jnp.array([0.0, 0.0, 0.0305]), jnp.eye(3), scene, camera)
     col = int(t.pos[0])
     assert img[5, col] < 0.1 < cam.SKY_BRIGHTNESS - 0.1 < img[5, (col + 32) % 64]
 
@@ -342,10 +367,11 @@ def test_mjx_backend_takes_the_pipes_and_stops_at_a_standing_one():
 def test_start_at_moves_the_snake_rigidly():
     phys = make_physics("mujoco", nthread=1)
     rest = phys.init()
-    moved = start_at(rest, 1.0, -2.0, 0.5)
+    moved = jax.jit(start_at)(rest, 1.0, -2.0, 0.5)
     np.testing.assert_allclose(moved.head_pos[:2], [1.0, -2.0], atol=1e-6)
     assert math.atan2(float(moved.head_mat[1, 0]), float(moved.head_mat[0, 0])) == pytest.approx(0.5, abs=1e-6)
-    a, b = forward_kinematics(rest.qpos)[0][1:], forward_kinematics(moved.qpos)[0][1:]
+    fk = jax.jit(forward_kinematics)
+    a, b = fk(rest.qpos)[0][1:], fk(moved.qpos)[0][1:]
     pair = lambda x: np.linalg.norm(x[:, None] - x[None], axis=-1)  # noqa: E731
     np.testing.assert_allclose(pair(np.asarray(b)), pair(np.asarray(a)), atol=1e-5)
     np.testing.assert_array_equal(moved.qpos[7:], rest.qpos[7:])
@@ -376,7 +402,7 @@ def test_physical_pipes_stand_where_the_camera_draws_them(pipe_physics):
             target = target + np.outer(rng.uniform(0, 2.0, 200), [math.cos(yaw + math.pi), math.sin(yaw + math.pi), 0])
         dirs = target - origin
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-        t, _ = render.intersect(world, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+        t, _ = jax.jit(render.intersect)(world, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
         t = np.where(np.asarray(t) > 50.0, -1.0, np.asarray(t))
         geom = np.zeros(1, np.int32)
         groups = np.zeros(6, np.uint8)
@@ -385,7 +411,7 @@ def test_physical_pipes_stand_where_the_camera_draws_them(pipe_physics):
         both = (exp > 0) & (t > 0)
         assert both.sum() > 80 and np.mean((exp > 0) == (t > 0)) > 0.95
         hit = origin + exp[exp > 0, None] * dirs[exp > 0]
-        gap = np.asarray(pipes.clearance(jnp.asarray(hit, jnp.float32), jnp.zeros(len(hit)), scene))[:, 0]
+        gap = np.asarray(_clearance(jnp.asarray(hit, jnp.float32), jnp.zeros(len(hit)), scene))[:, 0]
         assert np.abs(gap).max() < (1e-4 if kind == pipes.STANDING else 0.006)
         if kind == pipes.STANDING:
             np.testing.assert_allclose(t[both], exp[both], atol=1e-4)

@@ -201,6 +201,8 @@ def parse_scene(data: dict, source: str = "scene", capacity: int = MAX_PIPES) ->
     the radius, a grey level outside [0, 1], more pipes than slots, a pipe on
     the snake's body at the start.
     """
+    if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
+        raise UserError(f"a scene needs at least one pipe slot, got capacity {capacity!r}")
     if not isinstance(data, dict):
         _fail(source, "", "a scene must be a TOML table")
     unknown = sorted(set(data) - {"snake", "pipe"})
