@@ -83,6 +83,15 @@ def _bad(snake="x = 0.0\ny = 0.0\nyaw_deg = 0.0", **pipe):
         (_bad(x="-0.5", y="0.0"), r"overlaps the snake at its start"),
         (_bad(kind='"lying"', yaw_deg="0.0", wall="0.01", x="0.5", y="0.0"), r"overlaps the snake"),
         (_bad(colour='"red"'), r"unknown key 'colour'"),
+        (
+            _bad() + "[[pipe]]\nkind = 'standing'\nx = 3.2\ny = 0.5\nradius = 0.125\nlength = 2.0\n",
+            r"pipe 2: .* overlaps pipe 1",
+        ),
+        (
+            _bad(kind='"lying"', yaw_deg="90.0", wall="0.01", radius="0.26", length="3.0")
+            + "[[pipe]]\nkind = 'standing'\nx = 3.0\ny = -1.5\nradius = 0.125\nlength = 2.0\n",
+            r"pipe 2: the standing pipe at \(3.0, -1.5\) overlaps pipe 1",
+        ),
         (_bad(brightness="1.5"), r"brightness must be in \[0, 1\]"),
         (_bad(snake="x = 0.0\ny = 0.0"), r"\[snake\]: missing key 'yaw_deg'"),
         ("[[pipe]]\nkind = 'standing'\n", r"missing table \[snake\]"),
@@ -257,6 +266,9 @@ def test_predicates_on_hand_placed_heads():
         inside = _entered(jnp.array(head), mat, scene)
         assert bool(inside[1]) == want and not bool(inside[0]) and not bool(inside[2]), (head, want)
     assert bool(_reached(jnp.array([-0.29, 0.0, 0.26]), scene)[1])
+    # Offsets from a central line, positive on its right: along +y from the origin, x > 0 is right.
+    np.testing.assert_allclose(pipes.line_offset(scene, [0.0, 0.0], math.pi / 2)[:2], [3.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(pipes.line_offset(scene, [1.0, 1.0], 0.0)[:2], [-1.0, 1.0], atol=1e-6)
     # Clearance: hand-computed gaps to the standing solid and the lying wall (radius 0.26, bore 0.25).
     points = jnp.array([[3.5, 2.0, 1.0], [3.0, 2.0, 2.5], [1.0, 0.0, 0.26 + 0.4], [1.0, 0.0, 0.26 + 0.1]])
     gap = np.asarray(_clearance(points, jnp.full(4, 0.03), scene))

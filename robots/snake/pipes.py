@@ -84,6 +84,7 @@ __all__ = [
     "collided",
     "default_bodies",
     "entered",
+    "line_offset",
     "load_scene",
     "parse_scene",
     "place_pipes",
@@ -175,11 +176,9 @@ def _number(source, where, table, key, *, required=True, default=None):
     return float(value)
 
 
-def _segment_footprint_distance(start, kind, xy, yaw, radius, length) -> float:
-    """Smallest horizontal distance from the snake's body at the start to a pipe's footprint, m."""
-    x0, y0, heading = start
-    s = np.linspace(0.0, SNAKE_LENGTH, 35)
-    px, py = x0 - s * math.cos(heading), y0 - s * math.sin(heading)
+def _footprint_gap(px, py, kind, xy, yaw, radius, length) -> float:
+    """Smallest horizontal distance from the points ``(px, py)`` to a pipe's footprint, m (-1 if one is inside)."""
+    px, py = np.asarray(px, float), np.asarray(py, float)
     if kind == STANDING:
         return float(np.min(np.hypot(px - xy[0], py - xy[1]) - radius))
     # Lying: the rectangle from the entry back along the axis, 2 radius wide.
@@ -192,6 +191,25 @@ def _segment_footprint_distance(start, kind, xy, yaw, radius, length) -> float:
     return float(np.min(np.where(inside, -1.0, np.hypot(du, dv))))
 
 
+def _outline(kind, xy, yaw, radius, length, n=64):
+    """Points along a pipe's footprint outline (and its centre), for the overlap test."""
+    if kind == STANDING:
+        a = 2 * np.pi * np.arange(n) / n
+        return np.r_[xy[0], xy[0] + radius * np.cos(a)], np.r_[xy[1], xy[1] + radius * np.sin(a)]
+    ax, ay = -math.cos(yaw), -math.sin(yaw)
+    s = np.linspace(0.0, 1.0, n // 4)
+    u = np.concatenate([s * length, s * length, np.zeros_like(s), np.full_like(s, length)])
+    v = np.concatenate([np.full_like(s, radius), np.full_like(s, -radius), (2 * s - 1) * radius, (2 * s - 1) * radius])
+    return xy[0] + u * ax - v * ay, xy[1] + u * ay + v * ax
+
+
+def _segment_footprint_distance(start, kind, xy, yaw, radius, length) -> float:
+    """Smallest horizontal distance from the snake's body at the start to a pipe's footprint, m."""
+    x0, y0, heading = start
+    s = np.linspace(0.0, SNAKE_LENGTH, 35)
+    return _footprint_gap(x0 - s * math.cos(heading), y0 - s * math.sin(heading), kind, xy, yaw, radius, length)
+
+
 def parse_scene(data: dict, source: str = "scene", capacity: int = MAX_PIPES) -> PipeScene:
     """A `PipeScene` of ``capacity`` slots from a scene file's parsed TOML ``data`` (see the module docstring).
 
@@ -199,7 +217,8 @@ def parse_scene(data: dict, source: str = "scene", capacity: int = MAX_PIPES) ->
     and names the table and the key: a missing or unknown key, a wrong type,
     an unknown kind, a non-positive radius or length, a wall not thinner than
     the radius, a grey level outside [0, 1], more pipes than slots, a pipe on
-    the snake's body at the start.
+    the snake's body at the start or on another pipe (their footprints on the
+    floor overlap).
     """
     if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
         raise UserError(f"a scene needs at least one pipe slot, got capacity {capacity!r}")
@@ -263,6 +282,11 @@ def parse_scene(data: dict, source: str = "scene", capacity: int = MAX_PIPES) ->
         gap = _segment_footprint_distance(start, KINDS[kind], (x, y), yaw, radius, length)
         if gap < SNAKE_HALF_WIDTH:
             _fail(source, where, f"the {kind} pipe at ({x}, {y}) overlaps the snake at its start")
+        for j, other in enumerate(rows):
+            footprint = (other[0], other[1:3], other[3], other[4], other[6])
+            mine = (KINDS[kind], (x, y), yaw, radius, length)
+            if min(_footprint_gap(*_outline(*mine), *footprint), _footprint_gap(*_outline(*footprint), *mine)) <= 0:
+                _fail(source, where, f"the {kind} pipe at ({x}, {y}) overlaps pipe {j + 1}")
         rows.append((KINDS[kind], x, y, yaw, radius, wall, length, *greys))
     return _scene(start, rows, capacity)
 
@@ -543,6 +567,20 @@ def truth(cam_pos, cam_rot, scene: PipeScene, camera: render.Camera = render.Cam
         f * scene.radius / jnp.maximum(depth, 1e-6),
         in_view,
     )
+
+
+def line_offset(scene: PipeScene, point_xy, heading) -> jax.Array:
+    """Each pipe's signed distance from a line on the floor, m, positive on its right, ``(n,)``.
+
+    The line passes through ``point_xy`` (2,) along ``heading`` (rad); the
+    pipe's point is a standing pipe's axis, a lying pipe's entry centre. With
+    the snake's centre of mass and its heading averaged over a gait period
+    (ACCEPTANCE.md's "central line", kept by the caller), this is the true
+    lateral offset that Alg. 3's ``offset`` estimates; with the head's
+    position and the optical axis it is `truth`'s ``lateral`` on the floor.
+    """
+    d = scene.xy - jnp.asarray(point_xy, jnp.float32)
+    return d[:, 0] * jnp.sin(heading) - d[:, 1] * jnp.cos(heading)
 
 
 def _axial_radial(point, scene: PipeScene):
