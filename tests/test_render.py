@@ -170,3 +170,123 @@ def test_camera_is_static_configuration():
     img = jax.jit(render.render, static_argnames="camera")(scene, pos, jnp.eye(3), camera=camera)
     assert img.shape == (8, 16)
     np.testing.assert_allclose(img, render.render(scene, pos, jnp.eye(3), camera), atol=1e-6)
+
+
+def _tube_mesh_xml(radius, wall, length, pos, yaw, n=256):
+    """MJCF of a lying pipe as a mesh of ``n`` facets a surface: outer wall, bore, entry face, far plug.
+
+    The entry face is at the mesh origin, the bore runs along +x to the plug's inner face at
+    ``length - wall``; the plug's outer face closes the tube at ``length``. mj_ray casts against a
+    mesh's triangles, so this is the renderer's pipe up to the facets (a chord error of
+    radius * (1 - cos(pi / n)), 2e-5 m).
+    """
+    ang = 2 * np.pi * np.arange(n) / n
+    c, s = np.cos(ang), np.sin(ang)
+
+    def ring(r, x):
+        return np.stack([np.full(n, x), r * c, r * s], 1)
+
+    inner, end = radius - wall, length - wall
+    verts = np.concatenate(
+        [ring(radius, 0), ring(radius, length), ring(inner, 0), ring(inner, end), [[end, 0, 0], [length, 0, 0]]]
+    )
+    oe, of, ie, fi, fc, bc = 0, n, 2 * n, 3 * n, 4 * n, 4 * n + 1
+    faces = []
+    for k in range(n):
+        j = (k + 1) % n
+        faces += [[oe + k, of + k, of + j], [oe + k, of + j, oe + j]]  # outer wall
+        faces += [[ie + k, ie + j, fi + j], [ie + k, fi + j, fi + k]]  # bore
+        faces += [[oe + k, oe + j, ie + j], [oe + k, ie + j, ie + k]]  # entry face
+        faces += [[fi + k, fi + j, fc], [of + k, bc, of + j]]  # the plug's inner and outer faces
+    vert = " ".join(f"{v:.9g}" for v in verts.ravel())
+    face = " ".join(map(str, np.ravel(faces)))
+    return f"""<mujoco><compiler angle="radian"/>
+      <asset><mesh name="tube" vertex="{vert}" face="{face}" inertia="shell"/></asset>
+      <worldbody><geom name="tube" type="mesh" mesh="tube" pos="{pos[0]} {pos[1]} {pos[2]}" euler="0 0 {yaw}"/></worldbody>
+    </mujoco>"""
+
+
+def _pipes(entry, axis, radius, wall, length, valid=True):
+    one = jnp.ones(1)
+    return render.Pipes(
+        jnp.asarray([entry], jnp.float32),
+        jnp.asarray([axis], jnp.float32),
+        jnp.array([radius]),
+        jnp.array([wall]),
+        jnp.array([length]),
+        0.1 * one,
+        0.05 * one,
+        0.9 * one,
+        jnp.array([valid]),
+    )
+
+
+def test_pipe_with_wall_matches_mj_ray_on_a_tube_mesh_outside_inside_and_end_on():
+    radius, wall, length, yaw = 0.3, 0.03, 2.0, 0.3
+    pos = np.array([1.0, 0.2, 0.4])
+    model = mujoco.MjModel.from_xml_string(_tube_mesh_xml(radius, wall, length, pos, yaw))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    axis = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    cylinders, annuli = render.pipe_primitives(_pipes(pos, axis, radius, wall, length))
+    scene = render.Scene(render.no_spheres(), cylinders, ground_height=-100.0, annuli=annuli)
+    rng = np.random.default_rng(1)
+    # In front of the entry (rays into the bore, onto the entry face, the outer wall), inside the bore, beside it.
+    for origin in [pos - 1.5 * axis + [0.05, 0.1, 0.02], pos + 0.8 * axis + [0.0, 0.05, -0.05], pos + [0.5, -2.0, 0.3]]:
+        targets = pos + np.outer(rng.uniform(-0.1, length + 0.1, 200), axis) + rng.uniform(-radius, radius, (200, 3))
+        dirs = targets - origin
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        t, _ = render.intersect(scene, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+        t = np.where(np.asarray(t) > 50.0, -1.0, np.asarray(t))  # the far ground is not in the mesh model
+        expected = np.array([mujoco.mj_ray(model, data, origin, d, None, 1, -1, np.zeros(1, np.int32)) for d in dirs])
+        assert (expected > 0).sum() > 150
+        np.testing.assert_allclose(t, expected, atol=1e-3)
+
+
+def test_solid_pipe_is_a_capped_cylinder_like_mujocos():
+    model = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><geom type="cylinder" pos="3 -1 0.6" size="0.25 0.6"/></worldbody></mujoco>'
+    )
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    # A standing pipe: entry face (a disc, the wall being the radius) on top, axis down.
+    cylinders, annuli = render.pipe_primitives(_pipes([3.0, -1.0, 1.2], [0.0, 0.0, -1.0], 0.25, 0.25, 1.2))
+    scene = render.Scene(render.no_spheres(), cylinders, ground_height=-100.0, annuli=annuli)
+    origin = np.array([0.0, 0.0, 2.0])  # above the top: the cap is in view
+    rng = np.random.default_rng(0)
+    targets = np.concatenate(
+        [
+            [3.0, -1.0, 0.6] + rng.uniform(-0.3, 0.3, (80, 3)) * [1, 1, 2.5],
+            [3.0, -1.0, 1.2] + rng.uniform(-0.17, 0.17, (20, 3)) * [1, 1, 0],  # on the top cap
+        ]
+    )
+    dirs = targets - origin
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    t, _ = render.intersect(scene, jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+    expected = np.array([mujoco.mj_ray(model, data, origin, d, None, 1, -1, np.zeros(1, np.int32)) for d in dirs])
+    on_cap = (expected > 0) & (np.abs(origin[2] + expected * dirs[:, 2] - 1.2) < 1e-6)
+    assert (expected > 0).sum() > 70 and on_cap.sum() > 10
+    t = np.where(np.asarray(t) > 50.0, -1.0, np.asarray(t))  # the far ground is not in the MJCF
+    np.testing.assert_allclose(t, expected, rtol=1e-4, atol=1e-4)
+    # A hidden slot is never hit.
+    cylinders, annuli = render.pipe_primitives(_pipes([3.0, -1.0, 1.2], [0.0, 0.0, -1.0], 0.25, 0.25, 1.2, False))
+    t, _ = render.intersect(scene._replace(cylinders=cylinders, annuli=annuli), jnp.asarray(origin), jnp.asarray(dirs))
+    assert np.all(np.asarray(t) > 50.0)
+
+
+def test_entry_face_shows_the_ring_and_a_closed_far_end():
+    # End-on from 2 m: the entry face is a bright annulus between f (R - wall) / 2 and f R / 2 px,
+    # the bore and the far cap inside are dark (no background through the pipe).
+    radius, wall = 0.3, 0.06
+    cylinders, annuli = render.pipe_primitives(_pipes([2.0, 0.0, 0.0], [1.0, 0.0, 0.0], radius, wall, 3.0))
+    scene = render.Scene(
+        render.no_spheres(), cylinders, ground_height=-100.0, ground_brightness=0.75, ambient=1.0, annuli=annuli
+    )
+    img = np.asarray(render.render(scene, jnp.zeros(3), jnp.eye(3)))
+    f = render.Camera().focal
+    inner, outer = f * (radius - wall) / 2.0, f * radius / 2.0
+    row = img[64, 64:]
+    cols = np.arange(64) + 0.5
+    np.testing.assert_allclose(row[cols < inner - 0.5], 0.05)  # bore wall, then the far cap: both dark
+    np.testing.assert_allclose(row[(cols > inner + 0.5) & (cols < outer - 0.5)], 0.9)  # the entry face
+    np.testing.assert_allclose(row[cols > outer + 0.5], 0.75)  # sky around the pipe

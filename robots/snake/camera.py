@@ -9,7 +9,10 @@ expects, so the head's rotation matrix is the camera's.
 The scene is the papers' world: the target sphere of radius 0.3 m resting on
 the ground (section II-A of the snake R-STDP paper), the ground plane and,
 optionally, pipes (standing and lying cylinders, section 3.1 of the
-pipe-tracking paper). Brightness values are grey levels in [0, 1]: a dark
+pipe-tracking paper). `pipe_scene` is the pipe-tracking paper's world
+instead: the pipes of a `robots.snake.pipes.PipeScene` (walls with a
+thickness, an entry ring, a closed far end), the ground and the sky, and no
+target sphere. Brightness values are grey levels in [0, 1]: a dark
 target on a mid-grey floor under a bright sky, so that the target's outline
 makes events against either background.
 """
@@ -40,6 +43,24 @@ def scene(target_xy, pipes: render.Cylinders | None = None, target_radius: float
         ground_height=0.0,
         ground_brightness=GROUND_BRIGHTNESS,
         sky_brightness=SKY_BRIGHTNESS,
+    )
+
+
+def pipe_scene(pipes: render.Pipes) -> render.Scene:
+    """The pipe world the head camera sees: ``pipes`` (`robots.snake.pipes.render_pipes`), ground and sky.
+
+    No target sphere: the pipe-tracking paper's scenes hold one pipe and
+    nothing else (section 3.1). Traced in every field, so a batch of
+    episodes with different placements renders in one program.
+    """
+    cylinders, annuli = render.pipe_primitives(pipes)
+    return render.Scene(
+        spheres=render.no_spheres(),
+        cylinders=cylinders,
+        ground_height=0.0,
+        ground_brightness=GROUND_BRIGHTNESS,
+        sky_brightness=SKY_BRIGHTNESS,
+        annuli=annuli,
     )
 
 

@@ -87,13 +87,18 @@ __all__ = [
     "TUNED_DT",
     "TUNED_ITERATIONS",
     "TUNED_LS_ITERATIONS",
+    "PARK_DEPTH",
+    "PIPE_GROUP",
     "PhysState",
+    "PipeBodies",
+    "PipeSlot",
     "SnakePhysics",
     "forward_kinematics",
     "joint_qpos_index",
     "load_mj_model",
     "make_physics",
     "mjx_level_barriers",
+    "start_at",
 ]
 
 MODEL_PATH = pathlib.Path(__file__).with_name("snake.xml")
@@ -125,6 +130,12 @@ class PhysState(NamedTuple):
             are the camera's axes in the world: ``[:, 0]`` the optical axis
             (forward), ``[:, 1]`` left, ``[:, 2]`` up.
         com_pos: the snake's centre of mass, m, ``(3,)``.
+        mocap_pos: positions of the model's mocap bodies (the pipes of a
+            model built with `PipeBodies`), m, ``(nmocap, 3)``; ``(0, 3)``
+            for the snake alone. They are the episode's placement of the
+            pipes: the physics never moves them, the caller sets them
+            (``state._replace``), and both backends read them each step.
+        mocap_quat: their orientations (unit quaternions ``w, x, y, z``), ``(nmocap, 4)``.
     """
 
     qpos: jax.Array
@@ -134,10 +145,111 @@ class PhysState(NamedTuple):
     head_pos: jax.Array
     head_mat: jax.Array
     com_pos: jax.Array
+    mocap_pos: jax.Array
+    mocap_quat: jax.Array
+
+
+@dataclasses.dataclass(frozen=True)
+class PipeSlot:
+    """The sizes of one pipe slot's two bodies, m: a standing pipe and a lying one.
+
+    Geom sizes are model constants (MuJoCo and MJX take them from the model,
+    not the state), so they are static here; where the pipes stand is mocap
+    state, traced. A slot holds one standing and one lying body so that a
+    batch may mix kinds in one compiled program: the one not used is parked
+    far below the floor.
+    """
+
+    standing_radius: float = 0.125
+    standing_height: float = 2.0
+    lying_radius: float = 0.26
+    lying_wall: float = 0.01
+    lying_length: float = 3.0
+
+
+@dataclasses.dataclass(frozen=True)
+class PipeBodies:
+    """Physical pipes added to the snake's model: ``slots`` (`PipeSlot`), each two mocap bodies.
+
+    Slot ``i`` adds mocap body ``2 i``, a standing pipe (a solid cylinder,
+    capped, its body frame at the centre of the base, z up), and ``2 i + 1``,
+    a lying pipe (``staves`` boxes around the bore, an inscribed polygon of
+    the tube's wall, and a disc closing the far end; its body frame at the
+    centre of the entry face, x pointing out of the entry, the tube along
+    ``-x``). The snake's modules collide with every pipe geom (the head
+    through a massless capsule of the head's size: MJX has no cylinder-box
+    collision); pipes never collide with the floor or each other.
+    """
+
+    slots: tuple[PipeSlot, ...] = (PipeSlot(),)
+    staves: int = 16
+
+    def validate(self) -> "PipeBodies":
+        if self.staves < 6:
+            raise UserError(f"a lying pipe needs at least 6 staves, got {self.staves}")
+        for k, slot in enumerate(self.slots):
+            sizes = dataclasses.asdict(slot)
+            for name, value in sizes.items():
+                if not value > 0:
+                    raise UserError(f"pipe slot {k}: {name} must be positive, got {value}")
+            if slot.lying_wall >= slot.lying_radius:
+                raise UserError(f"pipe slot {k}: lying_wall {slot.lying_wall} must be less than lying_radius")
+        return self
+
+
+PARK_DEPTH = -50.0  # m: unused pipe bodies wait this far below the floor
+PIPE_GROUP = 1  # geom group of the pipes (the snake and the floor are in group 0)
+
+
+def _add_pipes(spec, bodies: PipeBodies, settings: str) -> None:
+    """Add the mocap pipe bodies of ``bodies`` to ``spec`` (see `PipeBodies`)."""
+    group = 2  # collision bit shared by the modules (contype) and the pipes (conaffinity) only
+    friction = [0.5, 0.005, 0.0001]
+    for geom in spec.geoms:
+        if geom.name.startswith("module") and geom.name != HEAD_BODY:
+            geom.contype = geom.contype | group
+    head = spec.body("module0")
+    proxy = head.add_geom()
+    proxy.name = "head_proxy"
+    proxy.type = mujoco.mjtGeom.mjGEOM_CAPSULE
+    proxy.size = [0.035, 0.013, 0.0]
+    proxy.quat = [np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4), 0.0]  # capsule axis along the head's x
+    proxy.density = 0.0
+    proxy.contype = group
+    proxy.conaffinity = 0
+    proxy.group = 3
+    n = bodies.staves
+    for k, slot in enumerate(bodies.slots):
+        stand = spec.worldbody.add_body(name=f"pipe{k}_standing", mocap=True, pos=[1e3 + 10 * k, 0.0, PARK_DEPTH])
+        g = stand.add_geom(name=f"pipe{k}_standing", type=mujoco.mjtGeom.mjGEOM_CYLINDER)
+        g.size = [slot.standing_radius, 0.5 * slot.standing_height, 0.0]
+        g.pos = [0.0, 0.0, 0.5 * slot.standing_height]
+        lying = spec.worldbody.add_body(name=f"pipe{k}_lying", mocap=True, pos=[1e3 + 10 * k, 5.0, PARK_DEPTH])
+        r, w, length = slot.lying_radius, slot.lying_wall, slot.lying_length
+        mid = r - 0.5 * w
+        half_width = mid * np.tan(np.pi / n) + 0.5 * w  # staves meet at the polygon's corners
+        for j in range(n):
+            phi = 2 * np.pi * j / n
+            g = lying.add_geom(name=f"pipe{k}_stave{j}", type=mujoco.mjtGeom.mjGEOM_BOX)
+            g.size = [0.5 * length, 0.5 * w, half_width]
+            g.pos = [-0.5 * length, mid * np.cos(phi), mid * np.sin(phi)]
+            g.quat = [np.cos(phi / 2), np.sin(phi / 2), 0.0, 0.0]  # box y radial
+        g = lying.add_geom(name=f"pipe{k}_cap", type=mujoco.mjtGeom.mjGEOM_CYLINDER)
+        g.size = [r, 0.5 * w, 0.0]
+        g.pos = [-length + 0.5 * w, 0.0, 0.0]
+        g.quat = [np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4), 0.0]
+    for geom in spec.geoms:
+        if geom.name.startswith("pipe"):
+            geom.contype = 0
+            geom.conaffinity = group
+            geom.condim = 3
+            geom.friction = friction
+            geom.rgba = [0.1, 0.1, 0.1, 1.0]
+            geom.group = PIPE_GROUP
 
 
 @functools.cache
-def load_mj_model(settings: str = "tuned", dt: float | None = None) -> mujoco.MjModel:
+def load_mj_model(settings: str = "tuned", dt: float | None = None, pipes: PipeBodies | None = None) -> mujoco.MjModel:
     """The compiled snake for MuJoCo's C engine (cached), with ``settings`` and time step ``dt``.
 
     Args:
@@ -147,6 +259,9 @@ def load_mj_model(settings: str = "tuned", dt: float | None = None) -> mujoco.Mj
             self-collision), the CG solver with `TUNED_ITERATIONS` iterations
             and `TUNED_LS_ITERATIONS` line-search iterations.
         dt: physics time step, s (default: `DEFAULT_DT` or `TUNED_DT`).
+        pipes: physical pipes to add (`PipeBodies`: mocap bodies placed
+            through `PhysState.mocap_pos`); ``None``, the snake alone, is
+            ``snake.xml``'s model unchanged.
 
     Returns:
         The model (treat it as read-only: it is shared).
@@ -170,6 +285,8 @@ def load_mj_model(settings: str = "tuned", dt: float | None = None) -> mujoco.Mj
         spec.option.solver = mujoco.mjtSolver.mjSOL_CG
         spec.option.iterations = TUNED_ITERATIONS
         spec.option.ls_iterations = TUNED_LS_ITERATIONS
+    if pipes is not None:
+        _add_pipes(spec, pipes.validate(), settings)
     model = spec.compile()
     size = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
     if size != 1 + model.nq + model.nv + model.na:
@@ -337,10 +454,13 @@ class SnakePhysics:
         settings: the model settings (`load_mj_model`).
         mj_model: the MuJoCo model both backends step.
         init: the resting snake: straight, on the floor along ``-x`` from the
-            head at the origin, looking along ``+x``.
+            head at the origin, looking along ``+x`` (pipes, if any, parked:
+            `PipeBodies`).
         step: one control step: ``substeps`` physics steps with the servo
-            targets ``ctrl`` ``(16,)`` (rad, joint 1 first) held. Pure;
+            targets ``ctrl`` ``(16,)`` (rad, joint 1 first) held and the
+            pipes where ``state.mocap_pos`` / ``mocap_quat`` put them. Pure;
             jit and vmap it.
+        pipes: the physical pipes of the model (`PipeBodies`), or ``None``.
     """
 
     backend: str
@@ -350,11 +470,13 @@ class SnakePhysics:
     mj_model: mujoco.MjModel
     init: Callable[[], PhysState]
     step: Callable[[PhysState, jax.Array], PhysState]
+    pipes: PipeBodies | None = None
 
 
-def _observe(qpos, qvel, act, time, settings, dt) -> PhysState:
+def _observe(qpos, qvel, act, time, mocap_pos, mocap_quat, settings, dt) -> PhysState:
+    # The snake's kinematics are those of the model without pipes (mocap bodies add no joints).
     _, _, head_pos, head_mat, com_pos = forward_kinematics(qpos, settings, dt)
-    return PhysState(qpos, qvel, act, time, head_pos, head_mat, com_pos)
+    return PhysState(qpos, qvel, act, time, head_pos, head_mat, com_pos, mocap_pos, mocap_quat)
 
 
 def _initial_state(model: mujoco.MjModel, settings: str, dt: float) -> Callable[[], PhysState]:
@@ -362,13 +484,15 @@ def _initial_state(model: mujoco.MjModel, settings: str, dt: float) -> Callable[
     qpos = jnp.asarray(data.qpos, jnp.float32)
     qvel = jnp.zeros(model.nv, jnp.float32)
     act = jnp.zeros(model.na, jnp.float32)
+    mocap_pos = jnp.asarray(data.mocap_pos.reshape(model.nmocap, 3), jnp.float32)
+    mocap_quat = jnp.asarray(data.mocap_quat.reshape(model.nmocap, 4), jnp.float32)
 
     @functools.cache
     def resting() -> PhysState:
         # Concrete even when first asked for inside a trace, so the cache never holds a tracer.
         with jax.ensure_compile_time_eval():
             observe = jax.jit(functools.partial(_observe, settings=settings, dt=dt))
-            return observe(qpos, qvel, act, jnp.zeros((), jnp.float32))
+            return observe(qpos, qvel, act, jnp.zeros((), jnp.float32), mocap_pos, mocap_quat)
 
     def init() -> PhysState:
         return resting()
@@ -424,6 +548,11 @@ class _CRunner:
         self.nthread = nthread
         self.spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         self.nstate = mujoco.mj_stateSize(model, self.spec)
+        # Pipes are mocap bodies: their poses travel with the control, held over the substeps.
+        self.control_spec = mujoco.mjtState.mjSTATE_CTRL
+        if model.nmocap:
+            self.control_spec |= mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+        self.nmocap = model.nmocap
         self.data = mujoco.MjData(model)
         self.datas = [mujoco.MjData(model) for _ in range(nthread)]
         self.pool = mj_rollout.Rollout(nthread=nthread) if nthread > 1 else None
@@ -437,7 +566,7 @@ class _CRunner:
         for b in range(state.shape[0]):
             mujoco.mj_setState(model, data, state[b], spec)
             data.qacc_warmstart[:] = 0.0
-            data.ctrl[:] = control[b]
+            mujoco.mj_setState(model, data, control[b], self.control_spec)
             mujoco.mj_step(model, data, nstep=self.substeps)
             mujoco.mj_getState(model, data, out[b], spec)
         return out
@@ -458,6 +587,7 @@ class _CRunner:
             self.datas,
             state,
             control,
+            control_spec=int(self.control_spec),
             skip_checks=True,
             nstep=self.substeps,
             initial_warmstart=warmstart,
@@ -467,7 +597,7 @@ class _CRunner:
         )
         return out[:, -1, :]
 
-    def __call__(self, qpos, qvel, act, time, ctrl):
+    def __call__(self, qpos, qvel, act, time, ctrl, mocap_pos, mocap_quat):
         batch_shape = time.shape
         n = int(np.prod(batch_shape, dtype=np.int64))
         state = np.concatenate(
@@ -479,7 +609,15 @@ class _CRunner:
             ],
             axis=1,
         )
-        control = np.asarray(ctrl, np.float64).reshape(n, self.model.nu)
+        # The control vector in mjtState order: ctrl, then mocap positions and quaternions.
+        control = np.concatenate(
+            [
+                np.asarray(ctrl, np.float64).reshape(n, self.model.nu),
+                np.asarray(mocap_pos, np.float64).reshape(n, 3 * self.nmocap),
+                np.asarray(mocap_quat, np.float64).reshape(n, 4 * self.nmocap),
+            ],
+            axis=1,
+        )
         with self.lock:
             if self.pool is not None and n >= self.nthread:
                 final = self._threaded(state, control)
@@ -507,9 +645,18 @@ def _mujoco_backend(model, substeps, nthread, settings, dt):
     def step(state: PhysState, ctrl: jax.Array) -> PhysState:
         ctrl = jnp.asarray(ctrl, jnp.float32)
         qpos, qvel, act, time = jax.pure_callback(
-            runner, shapes, state.qpos, state.qvel, state.act, state.time, ctrl, vmap_method="broadcast_all"
+            runner,
+            shapes,
+            state.qpos,
+            state.qvel,
+            state.act,
+            state.time,
+            ctrl,
+            state.mocap_pos,
+            state.mocap_quat,
+            vmap_method="broadcast_all",
         )
-        return _observe(qpos, qvel, act, time, settings, dt)
+        return _observe(qpos, qvel, act, time, state.mocap_pos, state.mocap_quat, settings, dt)
 
     return step
 
@@ -522,7 +669,13 @@ def _mjx_backend(model, substeps, settings, dt, impl="jax"):
 
     def step(state: PhysState, ctrl: jax.Array) -> PhysState:
         data = mjx.make_data(mx, impl=impl).replace(
-            qpos=state.qpos, qvel=state.qvel, act=state.act, time=state.time, ctrl=jnp.asarray(ctrl, jnp.float32)
+            qpos=state.qpos,
+            qvel=state.qvel,
+            act=state.act,
+            time=state.time,
+            ctrl=jnp.asarray(ctrl, jnp.float32),
+            mocap_pos=state.mocap_pos,
+            mocap_quat=state.mocap_quat,
         )
 
         def sub(d, _):
@@ -531,7 +684,7 @@ def _mjx_backend(model, substeps, settings, dt, impl="jax"):
         # The barriers are for XLA's CPU fusion pass on MJX's JAX implementation.
         with mjx_level_barriers() if impl == "jax" else contextlib.nullcontext():
             data, _ = jax.lax.scan(sub, data, None, length=substeps)
-        return _observe(data.qpos, data.qvel, data.act, data.time, settings, dt)
+        return _observe(data.qpos, data.qvel, data.act, data.time, state.mocap_pos, state.mocap_quat, settings, dt)
 
     return step
 
@@ -544,6 +697,7 @@ def make_physics(
     nthread: int | None = None,
     settings: str = "tuned",
     mjx_impl: str = "jax",
+    pipes: PipeBodies | None = None,
 ) -> SnakePhysics:
     """The snake's physics with the given backend (see the module's notes).
 
@@ -560,6 +714,9 @@ def make_physics(
         mjx_impl: MJX's implementation for ``"mjx"``: ``"jax"`` (anywhere) or
             ``"warp"`` (MJX-Warp, which MuJoCo points users of large or
             contact-rich scenes to; needs ``mujoco-warp`` and a CUDA GPU).
+        pipes: physical pipes (`PipeBodies`), placed per episode through the
+            state's mocap fields without recompiling (`robots.snake.pipes.place_pipes`);
+            ``None`` for the snake alone.
 
     Returns:
         A `SnakePhysics`.
@@ -591,9 +748,37 @@ def make_physics(
         nthread = os.cpu_count() or 1
     if nthread < 1:
         raise UserError(f"nthread must be at least 1, got {nthread}")
-    model = load_mj_model(settings, dt)
+    if pipes is not None and not isinstance(pipes, PipeBodies):
+        raise UserError(f"pipes must be a PipeBodies, got {type(pipes).__name__}")
+    model = load_mj_model(settings, dt, pipes)
     if backend == "mujoco":
         step = _mujoco_backend(model, int(substeps), int(nthread), settings, dt)
     else:
         step = _mjx_backend(model, int(substeps), settings, dt, mjx_impl)
-    return SnakePhysics(backend, dt, int(substeps), settings, model, _initial_state(model, settings, dt), step)
+    init = _initial_state(model, settings, dt)
+    return SnakePhysics(backend, dt, int(substeps), settings, model, init, step, pipes)
+
+
+def start_at(state: PhysState, x, y, yaw, settings: str = "tuned", dt: float | None = None) -> PhysState:
+    """``state``'s snake moved rigidly so that its head camera is at ``(x, y)`` and looks along ``yaw``.
+
+    A rotation about the vertical through the head camera and a translation,
+    applied to the free joint's position and quaternion (the hinges, the
+    velocities and the pipes are kept; velocities are meant to be zero, as
+    after ``init()``). ``yaw`` in radians from the world x axis; pure and
+    traced, so each episode of a batch may start elsewhere.
+    """
+    qpos = state.qpos
+    turn = yaw - jnp.arctan2(state.head_mat[1, 0], state.head_mat[0, 0])
+    c, s = jnp.cos(turn), jnp.sin(turn)
+    head = state.head_pos
+    root = qpos[:3] - head
+    moved = jnp.stack([x + c * root[0] - s * root[1], y + s * root[0] + c * root[1], qpos[2]])
+    half = 0.5 * turn
+    qz = jnp.stack([jnp.cos(half), 0.0 * half, 0.0 * half, jnp.sin(half)])
+    w0, v0 = qz[0], qz[1:]
+    q = qpos[3:7]
+    w1, v1 = q[0], q[1:]
+    quat = jnp.concatenate([(w0 * w1 - v0 @ v1)[None], w0 * v1 + w1 * v0 + jnp.cross(v0, v1)])
+    qpos = qpos.at[:3].set(moved.astype(qpos.dtype)).at[3:7].set(quat.astype(qpos.dtype))
+    return _observe(qpos, state.qvel, state.act, state.time, state.mocap_pos, state.mocap_quat, settings, dt)

@@ -1,10 +1,11 @@
-"""A pinhole camera that ray-casts spheres, open cylinders and a ground plane in JAX.
+"""A pinhole camera that ray-casts spheres, open cylinders, flat annuli and a ground plane in JAX.
 
 Each pixel casts one ray (or ``supersample**2`` rays, averaged) from the camera
 centre and takes the brightness of the nearest surface it hits. Intersections
 are closed forms (a quadratic per sphere and per cylinder, a division for the
 plane), so a 128 x 128 frame of a few primitives is a handful of fused array
-operations that ``jit`` and ``vmap`` like any other JAX function; the camera
+operations that ``jit`` and ``vmap`` like any other JAX function (an annulus
+or disc is one plane intersection and a radius test); the camera
 pose is a traced input, so a batch of robots renders a batch of frames in the
 same compiled program as their physics.
 
@@ -27,6 +28,9 @@ Conventions
   ``(x, y, z)``, ``x > 0``, is seen at column ``width / 2 - f y / x`` and row
   ``height / 2 - f z / x``. A sphere of radius ``R`` centred on the axis at
   distance ``d`` covers a disc of radius ``f R / sqrt(d**2 - R**2)`` pixels.
+* A pipe with a wall (`Pipes`) is drawn by `pipe_primitives` as its outer
+  tube, its bore (a second tube of radius ``radius - wall``), the annular
+  entry face and a disc closing the far end.
 * Brightness is in [0, 1]: each primitive has its own, optionally shaded by a
   directional light (``ambient + (1 - ambient) * max(0, n . light)``).
 """
@@ -47,10 +51,14 @@ __all__ = [
     "Camera",
     "Spheres",
     "Cylinders",
+    "Annuli",
+    "Pipes",
     "Scene",
     "spheres",
     "no_spheres",
     "no_cylinders",
+    "no_annuli",
+    "pipe_primitives",
     "standing_cylinder",
     "lying_cylinder",
     "concat_cylinders",
@@ -121,11 +129,99 @@ class Cylinders(NamedTuple):
     inner_brightness: jax.Array
 
 
-class Scene(NamedTuple):
-    """What the camera sees: spheres, cylinders, the ground and the sky.
+class Annuli(NamedTuple):
+    """``n`` flat rings: the points ``p`` of the plane through ``center`` normal to ``normal`` with
+    ``inner <= |p - center| <= outer``; ``inner = 0`` makes a disc (an end cap).
 
-    The numbers of spheres and cylinders are static (array shapes); either may
-    be zero. All fields may be traced (a moving target is a traced centre).
+    ``center (n, 3)``, ``normal (n, 3)`` unit vectors, ``inner (n,)``,
+    ``outer (n,)``, ``brightness (n,)``. A ring is seen from both sides (its
+    shading uses the normal turned towards the camera); ``outer < 0`` hides it,
+    so a fixed number of slots can hold fewer rings.
+    """
+
+    center: jax.Array
+    normal: jax.Array
+    inner: jax.Array
+    outer: jax.Array
+    brightness: jax.Array
+
+
+class Pipes(NamedTuple):
+    """``n`` pipes with a wall thickness, each drawn as two tubes and two flat rings (`pipe_primitives`).
+
+    A pipe runs from its entry, the open end at ``entry (n, 3)`` (the centre
+    of the end face), along the unit ``axis (n, 3)`` pointing into the bore,
+    for ``length (n,)``, and has outer ``radius (n,)`` and wall ``wall (n,)``.
+    The entry face is an annulus between ``radius - wall`` and ``radius``; the
+    far end is closed by a disc, so looking into the bore shows the inner
+    wall and the dark end cap, never the background (one ring to detect, not
+    two). ``wall = radius`` gives a solid cylinder, closed at both ends (a
+    standing pipe's capped top is its "entry" face then). ``valid (n,)``
+    (bool) hides the unused slots of a fixed-size scene. Brightness:
+    ``brightness`` the outer wall, ``inner_brightness`` the bore and the far
+    cap inside, ``ring_brightness`` the entry face.
+    """
+
+    entry: jax.Array
+    axis: jax.Array
+    radius: jax.Array
+    wall: jax.Array
+    length: jax.Array
+    brightness: jax.Array
+    inner_brightness: jax.Array
+    ring_brightness: jax.Array
+    valid: jax.Array
+
+
+def pipe_primitives(pipes: Pipes) -> tuple[Cylinders, Annuli]:
+    """The tubes and rings that draw ``pipes``: per pipe, ``(outer tube, bore)`` and ``(entry face, far cap)``.
+
+    Returns ``Cylinders`` of ``2 n`` tubes (outer walls, then bores) and
+    ``Annuli`` of ``2 n`` rings (entry faces, then far caps). A hidden pipe
+    gets a negative half length and outer radius (never hit); a solid pipe
+    (``wall >= radius``) has no bore, and its entry face is a disc. The far
+    cap is a ``wall`` thick plug: its disc is drawn at the bore's end,
+    ``length - wall`` from the entry, the face seen from inside.
+    """
+    n = pipes.radius.shape[0]
+    valid = jnp.asarray(pipes.valid, bool)
+    half = 0.5 * pipes.length
+    center = pipes.entry + half[:, None] * pipes.axis
+    bore = jnp.maximum(pipes.radius - pipes.wall, 0.0)
+    hidden = -jnp.ones((n,), jnp.float32)
+    outer_half = jnp.where(valid, half, hidden)
+    bore_half = jnp.where(valid & (bore > 0), half, hidden)
+    cyl = Cylinders(
+        jnp.concatenate([center, center]),
+        jnp.concatenate([pipes.axis, pipes.axis]),
+        jnp.concatenate([pipes.radius, jnp.where(bore > 0, bore, 1.0)]),
+        jnp.concatenate([outer_half, bore_half]),
+        jnp.concatenate([pipes.brightness, pipes.inner_brightness]),
+        jnp.concatenate([pipes.brightness, pipes.inner_brightness]),
+    )
+    far = pipes.entry + (pipes.length - jnp.minimum(pipes.wall, pipes.length))[:, None] * pipes.axis
+    outer = jnp.where(valid, pipes.radius, hidden)
+    ann = Annuli(
+        jnp.concatenate([pipes.entry, far]),
+        jnp.concatenate([pipes.axis, pipes.axis]),
+        jnp.concatenate([bore, jnp.zeros((n,), jnp.float32)]),
+        jnp.concatenate([outer, outer]),
+        jnp.concatenate([pipes.ring_brightness, pipes.inner_brightness]),
+    )
+    return cyl, ann
+
+
+def no_annuli() -> Annuli:
+    z = jnp.zeros((0,), jnp.float32)
+    return Annuli(jnp.zeros((0, 3)), jnp.zeros((0, 3)), z, z, z)
+
+
+class Scene(NamedTuple):
+    """What the camera sees: spheres, cylinders, flat rings, the ground and the sky.
+
+    The numbers of spheres, cylinders and rings are static (array shapes);
+    any may be zero (``annuli=None`` is none). All fields may be traced (a
+    moving target is a traced centre).
     """
 
     spheres: Spheres
@@ -135,6 +231,7 @@ class Scene(NamedTuple):
     sky_brightness: jax.Array | float = 0.75
     light: jax.Array | tuple = (0.3, -0.2, 0.93)  # direction towards the light, world frame
     ambient: jax.Array | float = 0.6
+    annuli: Annuli | None = None
 
 
 def spheres(center, radius, brightness) -> Spheres:
@@ -292,6 +389,24 @@ def intersect(scene: Scene, origin, dirs) -> tuple[jax.Array, jax.Array]:
         sign = jnp.where(first, 1.0, -1.0) / r
         base = jnp.where(first, cyl.brightness[i], cyl.inner_brightness[i])
         shade = _shade(scene, base, sign * (wpx + t * dpx), sign * (wpy + t * dpy), sign * (wpz + t * dpz))
+        t_best, b_best = keep_nearest(t, shade)
+
+    ann = scene.annuli
+    for i in range(0 if ann is None else ann.center.shape[0]):
+        # Plane (p - c) . n = 0 at t = (c - o) . n / (d . n), then inner <= |p - c| <= outer.
+        nx, ny, nz = ann.normal[i, 0], ann.normal[i, 1], ann.normal[i, 2]
+        wx, wy, wz = ann.center[i, 0] - ox, ann.center[i, 1] - oy, ann.center[i, 2] - oz
+        dn = dx * nx + dy * ny + dz * nz
+        wn = wx * nx + wy * ny + wz * nz
+        t = wn / jnp.where(jnp.abs(dn) > 1e-12, dn, 1.0)
+        px, py, pz = t * dx - wx, t * dy - wy, t * dz - wz
+        r2 = px * px + py * py + pz * pz
+        inner, outer = ann.inner[i], ann.outer[i]
+        hit = (jnp.abs(dn) > 1e-12) & (t > eps) & (outer > 0) & (r2 <= outer * outer) & (r2 >= inner * inner)
+        t = jnp.where(hit, t, _FAR)
+        # The face turned towards the camera: its normal points against the ray.
+        facing = jnp.where(dn < 0, 1.0, -1.0)
+        shade = _shade(scene, ann.brightness[i], facing * nx, facing * ny, facing * nz)
         t_best, b_best = keep_nearest(t, shade)
 
     bright = jnp.where(t_best < _FAR, b_best, scene.sky_brightness)
