@@ -146,6 +146,7 @@ def test_track_with_unknown_size_uses_the_detection_ten_valid_ones_earlier():
         jnp.zeros(30, jnp.int32),
         jnp.ones(30),
         valid,
+        jnp.ones(30),
     )
     params = pp.track_params(fov=math.radians(60.0), speed=0.05)
     est = jax.jit(pp.track)(params, pipes)
@@ -169,6 +170,7 @@ def test_track_with_known_size_and_pipe_offset_from_projection():
         jnp.zeros(5, jnp.int32),
         jnp.ones(5),
         jnp.ones(5, bool),
+        jnp.ones(5),
     )
     est = pp.track(pp.track_params(size=0.2), pipes)
     np.testing.assert_allclose(est.distance, d, rtol=1e-5)
@@ -192,7 +194,11 @@ def test_eq4_to_6_camera_offset_is_the_phase_shifted_swing():
 def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
     params = pp.track_params(size=0.2, swing_amplitude=0.1, swing_ratio=1.0, swing_phase=0.0)
     pipe = pp.Pipe(
-        *(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True)
+        *(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)),
+        jnp.int32(0),
+        jnp.float32(1),
+        jnp.bool_(True),
+        jnp.float32(1),
     )
     # Camera swung to the left of the central line (negative offset): the pipe straight
     # ahead of the camera is left of the central line too.
@@ -205,7 +211,7 @@ def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
 def test_track_vmaps_over_streams():
     t, _, width = _approach(12)
     ones = jnp.ones(12)
-    pipes = pp.Pipe(t, ones, width, 64.0 * ones, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool))
+    pipes = pp.Pipe(t, ones, width, 64.0 * ones, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool), ones)
     batch = jax.tree.map(lambda x: jnp.stack([x, x]), pipes)
     speeds = jnp.array([0.05, 0.10])
     params = jax.vmap(lambda v: pp.track_params(speed=0.0)._replace(speed=v))(speeds)
