@@ -438,7 +438,8 @@ def detection_rates(
 
     Each scene's events (frame difference, ``threshold``) are cut into slots
     of ``steps_per_slot`` frames, one grid update per frame, and run through
-    `spikejax.vision.detect.run` (both grids unless ``det`` says otherwise),
+    `spikejax.vision.detect.run` (default: both grids, 1 degree and 1 pixel
+    lines over the sensor's diagonal, circles of radius 1 to ``size / 2``),
     all scenes of a kind at once (``vmap``). Scene ``i`` of a kind is drawn
     from ``fold_in(key(seed), i)`` split by kind, so a rate does not depend on
     ``n_scenes`` beyond the scenes it adds.
@@ -454,7 +455,7 @@ def detection_rates(
 
     if det is None:
         det = detect.Detector(
-            line=hough.LineGrid(size, size),
+            line=hough.LineGrid(size, size, n_rho=int(np.ceil(size * np.sqrt(2))) + 2),
             circle=hough.CircleGrid(size, size, n_r=size // 2),
             sub_slots=steps_per_slot,
         )
