@@ -9,7 +9,7 @@ from robots.snake import calibration as cal
 from spikejax.errors import UserError
 from spikejax.vision import pipe as pp
 
-FIT_PERIODS, TEST_PERIODS = 5, 10
+FIT_PERIODS, TEST_PERIODS = 4, 10
 
 
 @pytest.fixture(scope="module")

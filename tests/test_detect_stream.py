@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 
 from spikejax.errors import UserError
-from spikejax.vision import detect, dvs, events, hough, scenes, stream
+from spikejax.vision import detect, dvs, hough, scenes, stream
 from spikejax.vision import pipe as pp
 
 SIZE, SLOTS, K = 32, 4, 5
 RUN = jax.jit(stream.run, static_argnums=0)
+UPDATE = jax.jit(stream.update, static_argnums=0)
 TRACK = jax.jit(pp.track)
 
 
@@ -67,7 +68,7 @@ def test_stream_gives_the_detections_of_detect_run_and_vmaps_like_a_loop(both):
     _same(entries, out.entry)
     # A vmapped stream equals the stream alone, fed one `update` (a step, then the slot's end when due) per step.
     tracker, params, ev, ts, angle, velocity = both[:6]
-    update = jax.jit(stream.update, static_argnums=0)
+    update = UPDATE
     state, ends = stream.init(tracker), []
     for i in range(SLOTS):
         for j in range(K):
@@ -133,26 +134,29 @@ def test_unknown_distance_policy():
     """With d = 0 the paper's Alg. 3 steers by the camera's swing; an assumed distance keeps the pipe's side."""
     swing = dict(swing_amplitude=0.1, swing_ratio=1.0, swing_phase=0.0, omega=1.0, speed=0.1)
     pipe = _pipe(pos=100.0)  # well right of the centre column 64
+    track_step = jax.jit(pp.track_step)
     paper = pp.track_params(**swing)
-    _, est = pp.track_step(paper, pp.track_init(), pipe, -0.5, 0.0)  # camera swung left
+    _, est = track_step(paper, pp.track_init(), pipe, -0.5, 0.0)  # camera swung left
     assert float(est.distance) == 0.0 and float(est.pipe_offset) == 0.0 and int(est.control) == -1
     ours = pp.track_params(**swing, assumed_distance=3.0)
-    _, est = pp.track_step(ours, pp.track_init(), pipe, -0.5, 0.0)
+    _, est = track_step(ours, pp.track_init(), pipe, -0.5, 0.0)
     np.testing.assert_allclose(float(est.pipe_offset), 3.0 * 36.0 / ours.focal, rtol=1e-6)
     assert float(est.distance) == 0.0 and int(est.control) == 1
 
 
-def test_control_is_held_for_hold_slots_then_straight():
-    det = detect.Detector(line=hough.LineGrid(16, 16, n_rho=24), circle=None, sub_slots=2)
-    tracker = stream.Tracker(det, target="body")
-    params = stream.tracker_params(tracker, hold=2, slot_steps=1)
+def test_control_is_held_for_hold_slots_then_straight(both):
+    tracker, params, ev = both[:3]
+    params = params._replace(hold=jnp.int32(2))  # traced: no recompile
     state = stream.init(tracker)._replace(control=jnp.int32(1))
-    update = jax.jit(stream.update, static_argnums=0)
+    nothing = jax.tree.map(lambda v: jnp.zeros_like(v[0, 0, 0]), ev)  # a step without events
     controls = []
-    for i in range(4):  # no events: no detections
-        state, out, ended = update(tracker, params, state, events.empty(16), 0.01 * i)
+    for i in range(4):  # slots without events: no detections
+        for j in range(K):
+            state, out, ended = UPDATE(
+                tracker, params, state, nothing, np.float64(0.1 * i + 0.02 * j), np.float64(0), np.float64(0)
+            )
         controls.append(int(out.control))
-        assert bool(ended) and int(state.steps) == 0 and not bool(out.body.valid)
+        assert bool(ended) and int(state.steps) == 0 and not bool(out.body.valid | out.entry.valid)
     assert controls == [1, 1, 0, 0]
 
 
