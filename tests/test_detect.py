@@ -233,6 +233,7 @@ def test_format_table_and_csv(tmp_path):
             offset_m=-0.1,
             control=-1,
             score=12.0,
+            support=0.9,
         ),
         dict(
             t=0.1,
@@ -245,6 +246,7 @@ def test_format_table_and_csv(tmp_path):
             offset_m=0.0,
             control=1,
             score=3.0,
+            support=0.75,
         ),
     ]
     assert detect_pipe.format_table([]) == "no pipe detected"
@@ -255,4 +257,4 @@ def test_format_table_and_csv(tmp_path):
     ]
     detect_pipe.write_csv(tmp_path / "d.csv", rows)
     lines = (tmp_path / "d.csv").read_text().splitlines()
-    assert lines[0] == ",".join(detect_pipe.COLUMNS) and lines[2] == "0.1,entry,0.0,30.0,50.0,60.0,0.0,0.0,1,3.0"
+    assert lines[0] == ",".join(detect_pipe.COLUMNS) and lines[2] == "0.1,entry,0.0,30.0,50.0,60.0,0.0,0.0,1,3.0,0.75"

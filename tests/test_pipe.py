@@ -12,6 +12,7 @@ from spikejax.vision import pipe as pp
 THETA = jnp.deg2rad(jnp.arange(180.0))  # the paper's line grid: 1 degree
 RHO = jnp.arange(-90.0, 180.0)  # signed rho, 1 pixel
 find_body = jax.jit(pp.find_body, static_argnames=("origin", "k"))
+find_entry = jax.jit(pp.find_entry, static_argnames=("k",))
 
 
 def _spikes(*lines, n_updates=10):
@@ -146,6 +147,7 @@ def test_track_with_unknown_size_uses_the_detection_ten_valid_ones_earlier():
         jnp.zeros(30, jnp.int32),
         jnp.ones(30),
         valid,
+        jnp.ones(30),
     )
     params = pp.track_params(fov=math.radians(60.0), speed=0.05)
     est = jax.jit(pp.track)(params, pipes)
@@ -169,6 +171,7 @@ def test_track_with_known_size_and_pipe_offset_from_projection():
         jnp.zeros(5, jnp.int32),
         jnp.ones(5),
         jnp.ones(5, bool),
+        jnp.ones(5),
     )
     est = pp.track(pp.track_params(size=0.2), pipes)
     np.testing.assert_allclose(est.distance, d, rtol=1e-5)
@@ -192,7 +195,11 @@ def test_eq4_to_6_camera_offset_is_the_phase_shifted_swing():
 def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
     params = pp.track_params(size=0.2, swing_amplitude=0.1, swing_ratio=1.0, swing_phase=0.0)
     pipe = pp.Pipe(
-        *(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)), jnp.int32(0), jnp.float32(1), jnp.bool_(True)
+        *(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 64.0, 64.0)),
+        jnp.int32(0),
+        jnp.float32(1),
+        jnp.bool_(True),
+        jnp.float32(1),
     )
     # Camera swung to the left of the central line (negative offset): the pipe straight
     # ahead of the camera is left of the central line too.
@@ -205,9 +212,78 @@ def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
 def test_track_vmaps_over_streams():
     t, _, width = _approach(12)
     ones = jnp.ones(12)
-    pipes = pp.Pipe(t, ones, width, 64.0 * ones, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool))
+    pipes = pp.Pipe(t, ones, width, 64.0 * ones, 64.0 * ones, jnp.zeros(12, jnp.int32), ones, jnp.ones(12, bool), ones)
     batch = jax.tree.map(lambda x: jnp.stack([x, x]), pipes)
     speeds = jnp.array([0.05, 0.10])
     params = jax.vmap(lambda v: pp.track_params(speed=0.0)._replace(speed=v))(speeds)
     est = jax.vmap(pp.track)(params, batch)
     np.testing.assert_allclose(est.distance[1, 10:], 2.0 * est.distance[0, 10:], rtol=1e-5)
+
+
+# --- beyond Section 2.3: upright edges, image support, one kind per object ----
+
+
+def test_support_of_lines_and_rings_by_hand():
+    image = np.zeros((32, 32), np.float32)
+    image[:, 10] = 1.0  # a full column of events at x = 10
+    image[:16, 25] = 1.0  # half a column at x = 25
+    origin = (16.0, 16.0)
+    support = jax.jit(pp.line_support, static_argnums=3)(
+        jnp.asarray(image), jnp.full(3, math.pi / 2), jnp.array([-6.0, 9.0, 4.0]), origin
+    )
+    # Near an event: columns 9-11 (all rows) and 24-26 (rows 0-16): chance q = (96 + 51) / 1024.
+    q = (3 * 32 + 3 * 17) / 1024
+    np.testing.assert_allclose(support, [1.0, (17 / 32 - q) / (1 - q), 0.0], atol=1e-6)
+    ring = np.zeros((32, 32), np.float32)
+    phi = np.linspace(0, 2 * np.pi, 400)
+    ring[np.round(16 + 8 * np.sin(phi)).astype(int), np.round(16 + 8 * np.cos(phi)).astype(int)] = 1.0
+    coverage, in_view = jax.jit(pp.ring_support)(
+        jnp.asarray(ring), jnp.array([16.0, 16.0, 0.0]), 16.0, jnp.array([8.0, 4.0, 8.0])
+    )
+    np.testing.assert_allclose(coverage[0], 1.0) and np.testing.assert_allclose(in_view[:2], 1.0)
+    assert float(coverage[1]) < 0.05  # radius 4 inside the ring: no events within a pixel
+    assert 0.5 <= float(in_view[2]) <= 0.56  # centred on the left edge: the right half (and the x = 0 column) in view
+
+
+def test_body_needs_upright_edges_drawn_by_the_events():
+    spikes = _spikes((+1, 90, 20, 3), (-1, 90, 40, 3))  # x = 20 (positive) and x = 40 (negative), origin (0, 0)
+    image = np.zeros((2, 128, 128), np.float32)
+    image[0, :, 20] = 1.0
+    image[1, :, 40] = 1.0
+    params = pp.BodyParams(max_tilt=math.radians(30.0), min_support=0.25)
+    found = find_body(params, spikes, THETA, RHO, 0.0, image=tuple(jnp.asarray(image)))
+    assert bool(found.valid) and float(found.support) == pytest.approx(1.0)
+    image[1, 10:, 40] = 0.0  # the negative edge drawn over 10 rows (and near 11) only: a curve's tangent, not an edge
+    assert not bool(find_body(params, spikes, THETA, RHO, 0.0, image=tuple(jnp.asarray(image))).valid)
+    horizontal = _spikes((+1, 0, 30, 3), (-1, 179, -50, 3))  # the theta-wrap pair above: horizon-like lines
+    assert not bool(find_body(params, horizontal, THETA, RHO, t=0.0).valid)
+
+
+def test_classify_keeps_the_better_supported_kind_where_they_overlap():
+    classify = jax.jit(pp.classify)
+    body = pp.Pipe(*(jnp.float32(v) for v in (0.0, math.pi / 2, 20.0, 30.0, 64.0)), jnp.int32(0), jnp.float32(2),
+                   jnp.bool_(True), jnp.float32(0.6))  # fmt: skip
+    entry = body._replace(kind=jnp.int32(1), width=jnp.float32(16.0), pos=jnp.float32(35.0), support=jnp.float32(0.8))
+    b, e = classify(body, entry)
+    assert not bool(b.valid) and bool(e.valid)
+    b, e = classify(body, entry._replace(support=jnp.float32(0.4)))
+    assert bool(b.valid) and not bool(e.valid)
+    b, e = classify(body, entry._replace(pos=jnp.float32(100.0)))  # two objects apart: both stay
+    assert bool(b.valid) and bool(e.valid)
+
+
+def test_entry_is_the_first_candidate_whose_ring_the_events_draw():
+    counts = np.zeros((2, 32, 32), np.float32)
+    counts[1, 16, 16] = 5.0  # the most active neuron: radius 9 at (16, 16), but no ring in the events
+    counts[0, 10, 12] = 3.0  # radius 8 at (12, 10): its ring is drawn
+    image = np.zeros((32, 32), np.float32)
+    phi = np.linspace(0, 2 * np.pi, 400)
+    image[np.round(10 + 8 * np.sin(phi)).astype(int).clip(0, 31), np.round(12 + 8 * np.cos(phi)).astype(int)] = 1.0
+    params = pp.EntryParams(min_count=1.0, min_coverage=0.5, min_in_view=0.5)
+    found = find_entry(jnp.asarray(counts), jnp.array([8.0, 9.0]), 0.0, params, image=jnp.asarray(image))
+    assert bool(found.valid) and (float(found.pos), float(found.row), float(found.width)) == (12.0, 10.0, 16.0)
+    assert not bool(
+        find_entry(jnp.asarray(counts), jnp.array([8.0, 9.0]), 0.0, params, image=jnp.zeros((32, 32))).valid
+    )
+    # Without an image, the paper's rule: the most active neuron.
+    assert float(find_entry(jnp.asarray(counts), jnp.array([8.0, 9.0]), 0.0).width) == 18.0

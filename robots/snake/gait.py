@@ -26,7 +26,9 @@ kinematics rather than a fitted curve: the first joint is set so that the head
 points along the mean heading of the 17 modules (`head_compensation`), which is
 the body's direction of motion averaged over the wave. Eq. (4)-(6) of the
 pipe-tracking paper (the camera's sideways offset estimated from the head
-joint) are in `spikejax.vision.pipe.camera_offset`.
+joint) have their one home in `spikejax.vision.pipe.camera_offset`; their
+tuple ``(A, alpha, phi_pos)`` is fitted for this gait in
+`robots.snake.calibration`.
 
 Sign conventions (those of ``snake.xml``): ``alpha_i > 0`` turns module ``i``
 to the left (odd ``i``, about ``+z``) or about ``+y`` (even ``i``) relative to

@@ -40,7 +40,19 @@ __all__ = [
     "write_csv",
 ]
 
-COLUMNS = ("t", "kind", "theta_deg", "width_px", "pos_px", "row_px", "distance_m", "offset_m", "control", "score")
+COLUMNS = (
+    "t",
+    "kind",
+    "theta_deg",
+    "width_px",
+    "pos_px",
+    "row_px",
+    "distance_m",
+    "offset_m",
+    "control",
+    "score",
+    "support",
+)
 
 
 def _add_arguments(parser) -> None:

@@ -37,7 +37,21 @@ from spikejax.vision import hough, io
 from spikejax.vision import pipe as pp
 from spikejax.vision.events import Events
 
-__all__ = ["Detections", "Detector", "DetectorParams", "DetectorState", "detect", "detector_params", "run", "slot_step"]
+__all__ = [
+    "BODY",
+    "ENTRY",
+    "Detections",
+    "Detector",
+    "DetectorParams",
+    "DetectorState",
+    "Evidence",
+    "detect",
+    "detector_params",
+    "event_images",
+    "find_pipes",
+    "run",
+    "slot_step",
+]
 
 MODES = ("sync", "async")
 
@@ -70,12 +84,20 @@ class Detector:
 
 
 class DetectorParams(NamedTuple):
-    """Traced parameters: the two grids' neurons, Alg. 2's conditions, the entry's minimum count."""
+    """Traced parameters: the two grids' neurons, Alg. 2's conditions for bodies and entries."""
 
     line: hough.HoughParams
     circle: hough.HoughParams
     body: pp.BodyParams
-    entry_min_count: jax.Array
+    entry: pp.EntryParams
+
+
+# The detector's judgment beyond Section 2.3's three conditions (measured in
+# docs/BENCHMARKS.md, "Pipe detection: false positives"): a body's edges within
+# 30 degrees of the vertical and drawn along a quarter of their length by the
+# slot's events; an entry's ring half in view and half drawn.
+BODY = pp.BodyParams(max_tilt=math.radians(30.0), min_support=0.25)
+ENTRY = pp.EntryParams(min_count=1.0, min_coverage=0.5, min_in_view=0.5)
 
 
 def detector_params(
@@ -85,17 +107,26 @@ def detector_params(
     circle_v_th: float | None = None,
     circle_decay: float | None = None,
     body: pp.BodyParams | None = None,
-    entry_min_count: float = 1.0,
+    entry: pp.EntryParams | None = None,
+    entry_min_count: float | None = None,
 ) -> DetectorParams:
-    """`DetectorParams` as float32 arrays (the circle grid defaults to the line grid's neurons)."""
-    body = pp.BodyParams() if body is None else body
+    """`DetectorParams` as float32 arrays.
+
+    The circle grid defaults to the line grid's neurons; ``body`` and
+    ``entry`` to `BODY` and `ENTRY`; ``entry_min_count`` replaces the
+    entry's ``min_count``.
+    """
+    body = BODY if body is None else body
+    entry = ENTRY if entry is None else entry
+    if entry_min_count is not None:
+        entry = entry._replace(min_count=entry_min_count)
     return DetectorParams(
         line=hough.hough_params(v_th, decay),
         circle=hough.hough_params(
             v_th if circle_v_th is None else circle_v_th, decay if circle_decay is None else circle_decay
         ),
         body=pp.BodyParams(*(jnp.asarray(v, jnp.float32) for v in body)),
-        entry_min_count=jnp.asarray(entry_min_count, jnp.float32),
+        entry=pp.EntryParams(*(jnp.asarray(v, jnp.float32) for v in entry)),
     )
 
 
@@ -121,15 +152,87 @@ def _grid_spikes(det, grid, params, state, events, times):
 
 def _empty_pipe(kind):
     z = jnp.zeros((), jnp.float32)
-    return pp.Pipe(z, z, z, z, z, jnp.asarray(kind, jnp.int32), z, jnp.zeros((), bool))
+    return pp.Pipe(z, z, z, z, z, jnp.asarray(kind, jnp.int32), z, jnp.zeros((), bool), z)
 
 
 def _flat(events: Events) -> Events:
     return jax.tree.map(lambda v: v.reshape(-1), events)
 
 
+class Evidence(NamedTuple):
+    """What one slot leaves for Alg. 2 (``None`` for a grid the `Detector` skips).
+
+    Attributes:
+        line_spikes: the line grid's output spikes of every update of the
+            slot, ``(n_updates, n_theta, n_rho)`` int8.
+        line_votes: the slot's signed line votes, ``(n_theta, n_rho)`` (ties).
+        circle_counts: circle-grid spikes per neuron over the slot (both
+            signs), ``(n_r, height, width)``.
+        circle_votes: the slot's unsigned circle votes (ties).
+        image: ``(positive, negative)`` events per pixel of the slot, each
+            ``(height, width)``: the support tests of `spikejax.vision.pipe`.
+    """
+
+    line_spikes: jax.Array | None
+    line_votes: jax.Array | None
+    circle_counts: jax.Array | None
+    circle_votes: jax.Array | None
+    image: tuple[jax.Array, jax.Array]
+
+
+def event_images(det: Detector, events: Events) -> tuple[jax.Array, jax.Array]:
+    """``(positive, negative)`` events per pixel, each ``(height, width)`` float32 (events of any shape)."""
+    grid = det.line if det.line is not None else det.circle
+    events = _flat(events)
+    signed = hough.event_image(grid, events, signed=True)
+    count = hough.event_image(grid, events, signed=False)
+    return 0.5 * (count + signed), 0.5 * (count - signed)
+
+
+def find_pipes(det: Detector, params: DetectorParams, evidence: Evidence, t) -> tuple[pp.Pipe, pp.Pipe]:
+    """Alg. 2 at the end of a slot: the body and the entry, judged by the slot's events and classified.
+
+    `spikejax.vision.pipe.find_body` on the line spikes (the parallel,
+    opposite, most frequent pair, upright and drawn by the events),
+    `spikejax.vision.pipe.find_entry` on the circle counts (the most active
+    neuron whose ring the events draw), then
+    `spikejax.vision.pipe.classify` (one kind per object).
+
+    Returns:
+        ``(body, entry)``, `spikejax.vision.pipe.Pipe` scalars (``valid``
+        False for a grid the `Detector` skips).
+    """
+    body, entry = _empty_pipe(pp.BODY), _empty_pipe(pp.ENTRY)
+    if det.line is not None:
+        votes = evidence.line_votes
+        body = pp.find_body(
+            params.body,
+            evidence.line_spikes,
+            jnp.asarray(det.line.thetas(), jnp.float32),
+            jnp.asarray(det.line.rhos(), jnp.float32),
+            t,
+            strength=(jnp.maximum(votes, 0.0), jnp.maximum(-votes, 0.0)),
+            image=evidence.image,
+            origin=det.line.origin,
+            row=0.5 * det.line.height,
+            k=det.k,
+        )
+    if det.circle is not None:
+        entry = pp.find_entry(
+            evidence.circle_counts,
+            jnp.asarray(det.circle.radii(), jnp.float32),
+            t,
+            params.entry,
+            strength=evidence.circle_votes,
+            image=evidence.image[0] + evidence.image[1],
+        )
+    if det.line is not None and det.circle is not None:
+        body, entry = pp.classify(body, entry)
+    return body, entry
+
+
 def slot_step(det: Detector, params: DetectorParams, state: DetectorState, events: Events, times, t):
-    """One slot: the grids over its ``sub_slots`` parts, then Alg. 2 on the spike counts.
+    """One slot: the grids over its ``sub_slots`` parts, then Alg. 2 (`find_pipes`).
 
     Args:
         det: static configuration.
@@ -142,35 +245,27 @@ def slot_step(det: Detector, params: DetectorParams, state: DetectorState, event
     Returns:
         ``(state, (body, entry, line_counts, circle_counts))``; the counts are
         the ``(positive, negative)`` spike counts per neuron, or ``None``.
+
+    Notes:
+        The tie-breaking votes are voted again over the whole slot: the
+        grids' `spikejax.vision.hough.sync_step` computes each part's votes
+        but does not return them. By linearity they are the sum of the parts'
+        votes (whole numbers, exact in float32), which is how
+        `spikejax.vision.stream` gathers them step by step.
     """
-    body, entry, line_counts, circle_counts = _empty_pipe(pp.BODY), _empty_pipe(pp.ENTRY), None, None
     line_state, circle_state = state
+    line_spikes = line_votes = line_counts = circle_counts = circle_votes = None
     if det.line is not None:
-        line_state, spikes = _grid_spikes(det, det.line, params.line, line_state, events, times)
-        line_counts = pp.spike_counts(spikes, 2)
-        votes = hough.line_votes(det.line, _flat(events))
-        body = pp.find_body(
-            params.body,
-            spikes,
-            jnp.asarray(det.line.thetas(), jnp.float32),
-            jnp.asarray(det.line.rhos(), jnp.float32),
-            t,
-            strength=(jnp.maximum(votes, 0.0), jnp.maximum(-votes, 0.0)),
-            origin=det.line.origin,
-            row=0.5 * det.line.height,
-            k=det.k,
-        )
+        line_state, line_spikes = _grid_spikes(det, det.line, params.line, line_state, events, times)
+        line_counts = pp.spike_counts(line_spikes, 2)
+        line_votes = hough.line_votes(det.line, _flat(events))
     if det.circle is not None:
         circle_state, spikes = _grid_spikes(det, det.circle, params.circle, circle_state, events, times)
         circle_counts = pp.spike_counts(spikes, 3)
-        votes = hough.circle_votes(det.circle, _flat(events), signed=False)
-        entry = pp.find_entry(
-            circle_counts[0] + circle_counts[1],
-            jnp.asarray(det.circle.radii(), jnp.float32),
-            t,
-            params.entry_min_count,
-            strength=votes,
-        )
+        circle_votes = hough.circle_votes(det.circle, _flat(events), signed=False)
+    total = None if circle_counts is None else circle_counts[0] + circle_counts[1]
+    evidence = Evidence(line_spikes, line_votes, total, circle_votes, event_images(det, events))
+    body, entry = find_pipes(det, params, evidence, t)
     return DetectorState(line_state, circle_state), (body, entry, line_counts, circle_counts)
 
 
@@ -252,13 +347,14 @@ class Detections(NamedTuple):
                         offset_m=float(est.offset[i]),
                         control=int(est.control[i]),
                         score=float(pipes.score[i]),
+                        support=float(pipes.support[i]),
                     )
                 )
         return sorted(rows, key=lambda r: (r["t"], r["kind"]))
 
 
 # Host bytes a slot's results take (two `Pipe`s, two `Estimate`s, the overflow), for the memory check.
-_SLOT_RESULT_BYTES = 2 * 8 * 4 + 2 * 6 * 4 + 8
+_SLOT_RESULT_BYTES = 2 * 9 * 4 + 2 * 6 * 4 + 8
 
 
 @ranged(slot=POSITIVE, sub_slots=Range(1, integer=True), capacity=Range(1, integer=True), chunk=Range(1, integer=True))
@@ -394,7 +490,15 @@ def _nothing(kind: int, slot_ends: np.ndarray) -> pp.Pipe:
     n = len(slot_ends)
     zeros = np.zeros(n, np.float32)
     return pp.Pipe(
-        slot_ends.astype(np.float32), zeros, zeros, zeros, zeros, np.full(n, kind, np.int32), zeros, np.zeros(n, bool)
+        slot_ends.astype(np.float32),
+        zeros,
+        zeros,
+        zeros,
+        zeros,
+        np.full(n, kind, np.int32),
+        zeros,
+        np.zeros(n, bool),
+        zeros,
     )
 
 

@@ -48,6 +48,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from spikejax.ranges import NON_NEGATIVE, POSITIVE, Range, ranged
 
@@ -55,17 +56,23 @@ __all__ = [
     "BODY",
     "ENTRY",
     "BodyParams",
+    "EntryParams",
     "Estimate",
     "Pipe",
     "TrackParams",
     "TrackState",
     "camera_offset",
+    "causal_mean",
+    "classify",
     "distance_from_expansion",
     "distance_from_size",
     "find_body",
     "find_entry",
     "head_joint_angle",
+    "line_support",
+    "mean_filter",
     "pipe_offset",
+    "ring_support",
     "spike_counts",
     "track",
     "track_init",
@@ -90,6 +97,10 @@ class Pipe(NamedTuple):
         score: output spikes behind the detection (the pair's smaller count
             for a body, the neuron's count for an entry).
         valid: whether a pipe was found in the slot.
+        support: the image evidence behind it, in ``[0, 1]``: the smaller of
+            the two edges' `line_support` for a body, the ring's
+            `ring_support` coverage for an entry; 1 when no event image was
+            given (the test was not made).
     """
 
     t: jax.Array
@@ -100,6 +111,7 @@ class Pipe(NamedTuple):
     kind: jax.Array
     score: jax.Array
     valid: jax.Array
+    support: jax.Array
 
 
 class BodyParams(NamedTuple):
@@ -112,12 +124,44 @@ class BodyParams(NamedTuple):
             one edge (its two polarities a pixel apart) are not a pipe.
         max_width: largest distance between the edges, pixels.
         min_count: fewest updates of the slot in which both edges fired.
+        max_tilt: largest angle of the edges from the image's vertical, rad
+            (``|theta - pi/2|``): the prior that a standing pipe stands up.
+            The horizon and a pipe's top and base are near-horizontal lines
+            of opposite polarity that would otherwise pair. ``pi/2`` (the
+            default) accepts every angle, as Section 2.3 states the conditions.
+        min_support: smallest `line_support` of each edge in the slot's
+            events of its polarity, in ``[0, 1]`` (applied when `find_body`
+            is given the event images): an edge must be a line in the image,
+            not a few pixels of a curve that the grid's neuron integrated over
+            time (a ring's sides are tangent to near-vertical lines over a
+            short arc). 0 (the default) skips the test.
     """
 
     angle_tol: jax.Array | float = math.radians(5.0)
     min_width: jax.Array | float = 3.0
     max_width: jax.Array | float = 1e9
     min_count: jax.Array | float = 1.0
+    max_tilt: jax.Array | float = 0.5 * math.pi
+    min_support: jax.Array | float = 0.0
+
+
+class EntryParams(NamedTuple):
+    """What makes a circle-grid neuron's firing a pipe entry, all traced.
+
+    Attributes:
+        min_count: fewest output spikes of the neuron in the slot.
+        min_coverage: smallest fraction of the ring's pixels inside the image
+            that have events of the slot within one pixel (`ring_support`),
+            in ``[0, 1]`` (applied when `find_entry` is given the event
+            image): two parallel edges, a horizon or noise make circle
+            neurons fire whose rings they touch at a few points only.
+        min_in_view: smallest fraction of the ring inside the image, in
+            ``[0, 1]``: a huge ring with a short arc in view is a line.
+    """
+
+    min_count: jax.Array | float = 1.0
+    min_coverage: jax.Array | float = 0.0
+    min_in_view: jax.Array | float = 0.0
 
 
 def spike_counts(spikes: jax.Array, n_grid_axes: int = 2) -> tuple[jax.Array, jax.Array]:
@@ -164,6 +208,7 @@ def find_body(
     t: jax.Array | float,
     *,
     strength: tuple[jax.Array, jax.Array] | None = None,
+    image: tuple[jax.Array, jax.Array] | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
     row: float = 64.0,
     k: int = 32,
@@ -174,7 +219,10 @@ def find_body(
     ``k`` that fired most negative ones are paired, every positive with every
     negative one. A pair qualifies when (Section 2.3) the polarities are
     opposite, the two lines are parallel within ``angle_tol`` (angles compared
-    modulo ``pi``) and ``min_width <= w <= max_width``. "The pair of parallel
+    modulo ``pi``) and ``min_width <= w <= max_width``; beyond the paper,
+    both edges must be within ``max_tilt`` of the vertical and, when the
+    slot's event images are given, each must be a line in the events of its
+    polarity (`line_support` >= ``min_support``). "The pair of parallel
     lines appears at the maximum frequency": the qualifying pair that fired
     together (in the same update) most often is the pipe; ties go to the
     pair with more spikes in all, then to the larger ``strength``. Counting
@@ -196,6 +244,8 @@ def find_body(
         t: time stamp of the slot, s.
         strength: optional ``(positive, negative)`` tie-breakers of the
             grid's shape, >= 0 (e.g. the votes of each sign in the slot).
+        image: optional ``(positive, negative)`` event counts per pixel of the
+            slot, each ``(height, width)``, for the support test.
         origin: ``(ox, oy)``, the pixel the grid measures ``rho`` from.
         row: the row at which ``pos`` is read (the image's middle row).
         k: candidates per polarity (static).
@@ -228,11 +278,20 @@ def find_body(
     r_neg_aligned = jnp.where(jnp.mod(wrap, 2) == 1, -r_neg[None, :], r_neg[None, :])
     angle = jnp.abs(th_neg_aligned - th_pos[:, None])
     width = jnp.abs(r_neg_aligned - r_pos[:, None])
+    upright_pos = jnp.abs(th_pos - 0.5 * jnp.pi) <= params.max_tilt
+    upright_neg = jnp.abs(th_neg - 0.5 * jnp.pi) <= params.max_tilt
+    if image is None:
+        s_pos = s_neg = jnp.ones((k,), jnp.float32)
+    else:
+        s_pos = line_support(image[0], th_pos, r_pos, origin)
+        s_neg = line_support(image[1], th_neg, r_neg, origin)
     ok = (
         (together >= jnp.maximum(params.min_count, 1e-6))
         & (angle <= params.angle_tol)
         & (width >= params.min_width)
         & (width <= params.max_width)
+        & (upright_pos & (s_pos >= params.min_support))[:, None]
+        & (upright_neg & (s_neg >= params.min_support))[None, :]
     )
     # Lexicographic: firing together, then the total count, then the strength (< 1).
     total = c_pos[:, None] + c_neg[None, :]
@@ -255,6 +314,7 @@ def find_body(
         kind=jnp.asarray(BODY, jnp.int32),
         score=together[i, j],
         valid=ok[i, j],
+        support=jnp.minimum(s_pos[i], s_neg[j]),
     )
 
 
@@ -262,13 +322,20 @@ def find_entry(
     counts: jax.Array,
     radii: jax.Array,
     t: jax.Array | float,
-    min_count: jax.Array | float = 1.0,
+    params: EntryParams | jax.Array | float = 1.0,
     *,
     strength: jax.Array | None = None,
+    image: jax.Array | None = None,
+    k: int = 16,
 ) -> Pipe:
-    """The pipe entry: the circle-grid neuron that fired most in the slot (Section 2.3).
+    """The pipe entry: the circle-grid neuron that fired most in the slot (Section 2.3), if it is a ring.
 
-    Ties (see `find_body`) are broken by ``strength`` when given.
+    The ``k`` neurons that fired most (ties broken by ``strength`` when given,
+    see `find_body`) are the candidates, in that order; the first with at
+    least ``min_count`` spikes whose ring is a ring in the slot's events
+    (`ring_support`: ``min_coverage`` of its pixels in view have events
+    within a pixel, ``min_in_view`` of it is in view; tested when ``image``
+    is given) is the entry.
 
     Args:
         counts: output spikes per neuron (both polarities), shape
@@ -276,28 +343,180 @@ def find_entry(
             ``a`` (the layout of `spikejax.vision.hough.CircleGrid`).
         radii: ``(n_r,)`` radius of each plane, pixels.
         t: time stamp of the slot, s.
-        min_count: fewest spikes for a detection.
+        params: `EntryParams`, or just ``min_count``.
         strength: optional tie-breaker of the grid's shape, >= 0.
+        image: optional events per pixel of the slot (any polarity),
+            ``(height, width)``, for the ring test.
+        k: candidates (static).
 
     Returns:
         A `Pipe` of kind `ENTRY`: ``pos = a``, ``row = b``,
         ``width = 2 r``, ``theta = 0``.
     """
-    height, width = counts.shape[1], counts.shape[2]
+    if not isinstance(params, EntryParams):
+        params = EntryParams(min_count=params)
+    n_r, height, width = counts.shape
+    k = min(k, counts.size)
     tie = _fractions(None if strength is None else (strength, strength), counts.shape)[0]
-    best = jnp.argmax((counts + tie).reshape(-1))
+    _, best = jax.lax.top_k((counts + tie).reshape(-1), k)
     ir, ib, ia = best // (height * width), (best // width) % height, best % width
     score = counts.reshape(-1)[best].astype(jnp.float32)
+    r = jnp.asarray(radii, jnp.float32)[ir]
+    a, b = ia.astype(jnp.float32), ib.astype(jnp.float32)
+    if image is None:
+        coverage = jnp.ones((k,), jnp.float32)
+        in_view = jnp.ones((k,), jnp.float32)
+    else:
+        coverage, in_view = ring_support(image, a, b, r)
+    ok = (
+        (score >= jnp.maximum(params.min_count, 1e-6))
+        & (coverage >= params.min_coverage)
+        & (in_view >= params.min_in_view)
+    )
+    i = jnp.argmax(ok)  # the first candidate that qualifies (0 if none does)
     return Pipe(
         t=jnp.asarray(t, jnp.float32),
         theta=jnp.zeros((), jnp.float32),
-        width=2.0 * jnp.asarray(radii, jnp.float32)[ir],
-        pos=ia.astype(jnp.float32),
-        row=ib.astype(jnp.float32),
+        width=2.0 * r[i],
+        pos=a[i],
+        row=b[i],
         kind=jnp.asarray(ENTRY, jnp.int32),
-        score=score,
-        valid=score >= jnp.maximum(min_count, 1e-6),
+        score=score[i],
+        valid=ok[i],
+        support=coverage[i],
     )
+
+
+def _near(image: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Pixels within one pixel (3 x 3) of a pixel with events, float32 0/1, padded by one pixel of zeros,
+    and their share of the image (the chance that any pixel is near an event)."""
+    near = jax.lax.reduce_window((image > 0).astype(jnp.float32), 0.0, jax.lax.max, (3, 3), (1, 1), "SAME")
+    return jnp.pad(near, 1), jnp.mean(near)
+
+
+def _above_chance(fraction, chance):
+    """``(fraction - chance) / (1 - chance)`` in ``[0, 1]``: 0 for a shape no better drawn than any other."""
+    return jnp.clip((fraction - chance) / jnp.maximum(1.0 - chance, 1e-6), 0.0, 1.0)
+
+
+def _sample(near: jax.Array, x, y):
+    """``near`` (padded) at the nearest pixels of points ``(x, y)``, and whether they are on the image."""
+    height, width = near.shape[0] - 2, near.shape[1] - 2
+    xi, yi = jnp.round(x), jnp.round(y)
+    inside = (xi >= 0) & (xi <= width - 1) & (yi >= 0) & (yi <= height - 1)
+    xi = jnp.clip(xi, -1, width).astype(jnp.int32) + 1
+    yi = jnp.clip(yi, -1, height).astype(jnp.int32) + 1
+    return jnp.where(inside, near[yi, xi], 0.0), inside
+
+
+def line_support(image: jax.Array, theta, rho, origin: tuple[float, float] = (0.0, 0.0)) -> jax.Array:
+    """The fraction of a line's pixels in the image that have events within one pixel.
+
+    The line ``rho = (x - ox) sin(theta) + (y - oy) cos(theta)`` of Eq. (2) is
+    sampled at unit steps along its direction across the whole image; the
+    support is the share of the samples inside the image whose 3 x 3
+    neighbourhood holds an event, above chance: with ``q`` the share of all
+    pixels of the image near an event (noise), a fraction ``h`` counts as
+    ``(h - q) / (1 - q)``. A pipe's edge seen while the camera sweeps is
+    covered along its whole visible length (about 1), a ring's side or a
+    horizon bob's short stretch only over a few pixels, a line through noise
+    no better than chance (0).
+
+    Args:
+        image: events per pixel, ``(height, width)`` (one polarity, or both).
+        theta, rho: the line(s), rad and pixels, any matching shape.
+        origin: ``(ox, oy)``, the pixel ``rho`` is measured from.
+
+    Returns:
+        Fractions in ``[0, 1]``, the shape of ``theta``; 0 for a line that
+        misses the image.
+    """
+    height, width = image.shape
+    near, chance = _near(image)
+    reach = int(math.ceil(math.hypot(width, height))) + 1
+    s = jnp.arange(-reach, reach + 1, dtype=jnp.float32)
+    theta, rho = jnp.asarray(theta, jnp.float32)[..., None], jnp.asarray(rho, jnp.float32)[..., None]
+    nx, ny = jnp.sin(theta), jnp.cos(theta)
+    # The foot of the normal from the origin, then unit steps along the line (direction (ny, -nx)).
+    x = origin[0] + rho * nx + s * ny
+    y = origin[1] + rho * ny - s * nx
+    hit, inside = _sample(near, x, y)
+    return _above_chance(jnp.sum(hit, -1) / jnp.maximum(jnp.sum(inside, -1), 1.0), chance)
+
+
+def ring_support(image: jax.Array, a, b, r, n: int = 128) -> tuple[jax.Array, jax.Array]:
+    """How much of the ring ``(x - a)^2 + (y - b)^2 = r^2`` of Eq. (3) the slot's events draw.
+
+    The ring is sampled at ``n`` equally spaced angles (static); a sample is
+    drawn when its 3 x 3 neighbourhood holds an event, counted above chance as
+    in `line_support`.
+
+    Args:
+        image: events per pixel, ``(height, width)``.
+        a, b, r: centre column, centre row and radius, pixels, any matching shape.
+
+    Returns:
+        ``(coverage, in_view)``: the fraction of the samples inside the image
+        that are drawn (above chance), and the fraction of the samples inside
+        the image; each the shape of ``a``.
+    """
+    near, chance = _near(image)
+    phi = jnp.arange(n, dtype=jnp.float32) * (2 * math.pi / n)
+    a, b, r = (jnp.asarray(v, jnp.float32)[..., None] for v in (a, b, r))
+    hit, inside = _sample(near, a + r * jnp.cos(phi), b + r * jnp.sin(phi))
+    n_in = jnp.sum(inside, -1)
+    return _above_chance(jnp.sum(hit, -1) / jnp.maximum(n_in, 1.0), chance), n_in / n
+
+
+def classify(body: Pipe, entry: Pipe) -> tuple[Pipe, Pipe]:
+    """One object, one kind: when a body and an entry overlap in the image, keep the better supported one.
+
+    With both grids running, the sides of a ring can pass for a body's two
+    edges and two edges can make a circle neuron fire; when the body's extent
+    ``[pos - w/2, pos + w/2]`` and the ring's ``[a - r, a + r]`` overlap they
+    are taken for the same object, and the one with the larger ``support``
+    (the share of its outline that the slot's events draw; a tie goes to the
+    entry) stays valid. Detections that do not overlap (two pipes) both stay.
+
+    Args:
+        body, entry: `find_body` and `find_entry` of the same slot.
+
+    Returns:
+        ``(body, entry)`` with at most one of them valid where they overlap.
+    """
+    gap = jnp.abs(body.pos - entry.pos) - 0.5 * (body.width + entry.width)
+    both = body.valid & entry.valid & (gap < 0)
+    entry_wins = entry.support >= body.support
+    return (
+        body._replace(valid=body.valid & ~(both & entry_wins)),
+        entry._replace(valid=entry.valid & ~(both & ~entry_wins)),
+    )
+
+
+def mean_filter(history: jax.Array, count) -> jax.Array:
+    """The paper's mean filter on the timeline (Section 2.4.1): the mean of the last samples.
+
+    Args:
+        history: ``(window, ...)`` a ring of the last ``window`` samples.
+        count: samples written so far; while fewer than ``window``, the mean
+            is over those (the ring's other rows are ignored).
+
+    Returns:
+        The mean over the samples present, the shape of ``history[0]``.
+    """
+    window = history.shape[0]
+    present = jnp.arange(window) < jnp.minimum(count, window)
+    weights = present.astype(jnp.float32) / jnp.maximum(jnp.minimum(count, window), 1).astype(jnp.float32)
+    return jnp.tensordot(weights, history, axes=1)
+
+
+def causal_mean(x, window: int) -> np.ndarray:
+    """`mean_filter` along a whole sequence ``(n, ...)``: sample ``i`` is the mean of ``x[max(0, i - window + 1) : i + 1]``."""
+    x = np.asarray(x, np.float64)
+    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
+    i = np.arange(1, len(x) + 1)
+    lo = np.maximum(i - window, 0)
+    return ((c[i] - c[lo]).T / (i - lo)).T
 
 
 # --- Alg. 3 ------------------------------------------------------------------
@@ -385,7 +604,7 @@ def pipe_offset(distance, pos, center, focal):
     return distance * (pos - center) / focal
 
 
-@ranged(focal=POSITIVE, size=NON_NEGATIVE, speed=NON_NEGATIVE)
+@ranged(focal=POSITIVE, size=NON_NEGATIVE, speed=NON_NEGATIVE, assumed_distance=NON_NEGATIVE)
 class TrackParams(NamedTuple):
     """Parameters of Alg. 3 (traced; build them with `track_params`).
 
@@ -396,6 +615,13 @@ class TrackParams(NamedTuple):
         speed: ``v``, forward speed of the robot, m/s, >= 0.
         swing_amplitude, swing_ratio, swing_phase: ``(A, alpha, phi_pos)`` of Eq. (6).
         omega: the gait's angular frequency, rad/s.
+        assumed_distance: the distance, m, that ``pipeOffset`` uses while the
+            distance is unknown (``d = 0``: unknown size and fewer than
+            ``interval`` detections, or a pipe that did not grow). 0 is the
+            paper's Alg. 3: ``pipeOffset = 0``, so ``offset = cameraOffset``
+            and ``C`` follows the camera's own swing, whatever side the pipe
+            is on. A positive value keeps the side of the pipe in the image
+            from the first detection (see `spikejax.vision.stream`).
     """
 
     focal: jax.Array
@@ -406,6 +632,7 @@ class TrackParams(NamedTuple):
     swing_ratio: jax.Array
     swing_phase: jax.Array
     omega: jax.Array
+    assumed_distance: jax.Array
 
 
 @ranged(fov=Range(0, math.pi, low_open=True, high_open=True), width=Range(1, integer=True))
@@ -419,6 +646,7 @@ def track_params(
     swing_ratio: float = 1.0,
     swing_phase: float = 0.0,
     omega: float = 1.0,
+    assumed_distance: float = 0.0,
 ) -> TrackParams:
     """`TrackParams` from the camera's field of view (rad, in ``(0, pi)``) and width (pixels).
 
@@ -435,6 +663,7 @@ def track_params(
         swing_ratio=f(swing_ratio),
         swing_phase=f(swing_phase),
         omega=f(omega),
+        assumed_distance=f(assumed_distance),
     )
 
 
@@ -471,7 +700,8 @@ def track_step(
 
     The distance is Eq. (8) when ``params.size > 0``; otherwise Eq. (9)
     against the detection ``interval`` valid detections earlier (Alg. 3,
-    line 6), or 0 before there were that many. Then ``pipeOffset``,
+    line 6), or 0 before there were that many (then ``pipeOffset`` uses
+    ``params.assumed_distance``, 0 in the paper). Then ``pipeOffset``,
     ``cameraOffset`` (Eq. 6), ``offset = pipeOffset + cameraOffset`` and
     ``C = sign(offset)``. An invalid ``pipe`` leaves the history unchanged and
     gives zeros.
@@ -493,7 +723,8 @@ def track_step(
     d_grown = distance_from_expansion(state.width[slot], pipe.width, pipe.t - state.t[slot], params.speed)
     d_grown = jnp.where(state.count >= interval, d_grown, 0.0)
     distance = jnp.where(pipe.valid, jnp.where(known, d_known, d_grown), 0.0)
-    p_off = pipe_offset(distance, pipe.pos, params.center, params.focal)
+    d_offset = jnp.where(distance > 0, distance, params.assumed_distance)
+    p_off = pipe_offset(d_offset, pipe.pos, params.center, params.focal)
     c_off = camera_offset(
         head_angle, head_velocity, params.swing_amplitude, params.swing_ratio, params.swing_phase, params.omega
     )
