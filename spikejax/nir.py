@@ -467,13 +467,17 @@ class Network:
     Attributes:
         order: node names, in the order they are stepped.
         kinds: each node's kind: ``input``, ``output``, ``affine``, ``linear``,
-            ``scale``, ``delay``, or a neuron (``lif``, ``discrete_lif``,
+            ``conv2d``, ``sumpool2d``, ``flatten``, ``scale``, ``delay``, or a neuron (``lif``, ``discrete_lif``,
             ``iaf_psc_alpha``, ``cuba_lif``, ``if``).
         sizes: each node's output size.
         sources: each node's sources, names.
         late: for each source, whether it is read from the previous step.
         delays: each ``delay`` node's steps (0 for other kinds).
         dt: the step, in the graph's unit of time.
+        convs: each ``conv2d`` node's ``(input shape (C, H, W), stride, padding,
+            dilation, groups)``, each ``sumpool2d`` node's ``(input shape, kernel,
+            stride, padding)``, None for other kinds (signals stay flat between
+            nodes; a convolution or pooling reshapes its input and flattens its output).
     """
 
     order: tuple[str, ...]
@@ -483,6 +487,7 @@ class Network:
     late: tuple[tuple[bool, ...], ...]
     delays: tuple[int, ...]
     dt: float
+    convs: tuple = ()
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -515,7 +520,9 @@ def _import_node(nir, name, node, dt):
 
     def arr(x, n=None):
         a = np.asarray(x, np.float32)
-        return jnp.asarray(a if n is None else np.broadcast_to(a, (n,)))
+        if n is not None:
+            a = a.reshape(-1) if a.size == n else np.broadcast_to(a, (n,))
+        return jnp.asarray(a)
 
     def bad(why):
         return UserError(f"NIR node {name!r} ({kind_name}): {why}")
@@ -536,6 +543,22 @@ def _import_node(nir, name, node, dt):
                 raise bad(f"bias of shape {b.shape} does not match weight {w.shape}")
             return "affine", w.shape[0], (arr(w.T), arr(b)), 0
         return "linear", w.shape[0], (arr(w.T),), 0
+    if isinstance(node, nir.Conv2d):
+        w = np.asarray(node.weight, np.float32)
+        if w.ndim != 4 or isinstance(node.padding, str) or node.input_shape is None:
+            raise bad("only 4-D weights, numeric padding and a known input shape are supported")
+        (_, h, wd), stride, pad, dil, _ = _conv_static(node)
+        # The output shape as torch (and lax) compute it, from the kernel's own height and width.
+        out = [
+            (n + 2 * p_ - d * (k - 1) - 1) // s_ + 1 for n, p_, d, k, s_ in zip((h, wd), pad, dil, w.shape[2:], stride)
+        ]
+        return "conv2d", int(w.shape[0] * out[0] * out[1]), (jnp.asarray(w), arr(node.bias, w.shape[0])), 0
+    if isinstance(node, nir.SumPool2d):
+        shape, kernel, stride, pad = _pool_static(node)
+        out = [(n + 2 * p_ - k) // s_ + 1 for n, p_, k, s_ in zip(shape[1:], pad, kernel, stride)]
+        return "sumpool2d", int(shape[0] * out[0] * out[1]), None, 0
+    if isinstance(node, nir.Flatten):
+        return "flatten", int(np.prod(list(node.input_type.values())[0])), None, 0
     if isinstance(node, nir.Scale):
         s = np.asarray(node.scale).reshape(-1)
         return "scale", s.size, (arr(s),), 0
@@ -597,7 +620,27 @@ def _import_node(nir, name, node, dt):
             dt=jnp.float32(dt),
         )
         return "cuba_lif", n, p, 0
-    raise bad("not supported; spikejax imports Input, Output, Affine, Linear, Scale, Delay, LIF, CubaLIF and IF nodes")
+    raise bad(
+        "not supported; spikejax imports Input, Output, Affine, Linear, Conv2d, SumPool2d, Flatten, Scale, Delay, "
+        "LIF, CubaLIF and IF nodes"
+    )
+
+
+def _pair(v) -> tuple[int, int]:
+    v = np.asarray(v).reshape(-1)
+    return (int(v[0]), int(v[-1]))
+
+
+def _conv_static(node) -> tuple:
+    """A Conv2d's static shape: ``(input (C, H, W), stride, padding, dilation, groups)``."""
+    shape = tuple(int(v) for v in node.input_type["input"])
+    return shape, _pair(node.stride), _pair(node.padding), _pair(node.dilation), int(node.groups)
+
+
+def _pool_static(node) -> tuple:
+    """A SumPool2d's static shape: ``(input (C, H, W), kernel, stride, padding)``."""
+    shape = tuple(int(v) for v in node.input_type["input"])
+    return shape, _pair(node.kernel_size), _pair(node.stride), _pair(node.padding)
 
 
 def from_nir(g, *, dt: float | None = None) -> tuple[Network, dict]:
@@ -622,7 +665,7 @@ def from_nir(g, *, dt: float | None = None) -> tuple[Network, dict]:
 
     Raises:
         UserError: in one line naming the node, for an unsupported node
-            (Conv2d, a nested graph, ...), a bad shape or an edge to nowhere.
+            (a nested graph, pooling, ...), a bad shape or an edge to nowhere.
     """
     nir = _nir()
     if isinstance(g, (str, Path)):
@@ -670,6 +713,20 @@ def from_nir(g, *, dt: float | None = None) -> tuple[Network, dict]:
         late.append(tuple((a, name) in back for a in pre))
         kind, size = info[name][0], info[name][1]
         for a in pre:
+            if kind == "conv2d":
+                c = _conv_static(g.nodes[name])
+                if info[a][1] != int(np.prod(c[0])):
+                    raise UserError(
+                        f"NIR node {name!r}: input from {a!r} has size {info[a][1]}, the convolution {c[0]}"
+                    )
+                continue
+            if kind == "sumpool2d":
+                c = _pool_static(g.nodes[name])
+                if info[a][1] != int(np.prod(c[0])):
+                    raise UserError(f"NIR node {name!r}: input from {a!r} has size {info[a][1]}, the pooling {c[0]}")
+                continue
+            if kind == "flatten" and info[a][1] == size:
+                continue
             if info[a][1] != size and kind not in ("affine", "linear"):
                 raise UserError(f"NIR node {name!r}: input from {a!r} has size {info[a][1]}, the node {size}")
             if kind in ("affine", "linear") and info[a][1] != info[name][2][0].shape[0]:
@@ -688,6 +745,14 @@ def from_nir(g, *, dt: float | None = None) -> tuple[Network, dict]:
         late=tuple(late),
         delays=tuple(info[n][3] for n in order),
         dt=dt,
+        convs=tuple(
+            _conv_static(g.nodes[n])
+            if info[n][0] == "conv2d"
+            else _pool_static(g.nodes[n])
+            if info[n][0] == "sumpool2d"
+            else None
+            for n in order
+        ),
     )
     params = {n: info[n][2] for n in order if info[n][2] is not None}
     return net, params
@@ -750,7 +815,30 @@ def network_step(net: Network, params: dict, state: dict, inputs: Mapping[str, j
         x = xs[0]
         for more in xs[1:]:
             x = x + more
-        if kind == "output":
+        if kind == "conv2d":
+            shape, stride, pad, dilation, groups = net.convs[net.order.index(name)]
+            y = jax.lax.conv_general_dilated(
+                x.reshape((1, *shape)),
+                p[0],
+                window_strides=stride,
+                padding=[(pad[0], pad[0]), (pad[1], pad[1])],
+                rhs_dilation=dilation,
+                feature_group_count=groups,
+                dimension_numbers=("NCHW", "OIHW", "NCHW"),
+            )[0]
+            now[name] = (y + p[1][:, None, None]).reshape(-1)
+        elif kind == "sumpool2d":
+            shape, kernel, stride, pad = net.convs[net.order.index(name)]
+            y = jax.lax.reduce_window(
+                x.reshape(shape),
+                0.0,
+                jax.lax.add,
+                (1, *kernel),
+                (1, *stride),
+                [(0, 0), (pad[0], pad[0]), (pad[1], pad[1])],
+            )
+            now[name] = y.reshape(-1)
+        elif kind in ("output", "flatten"):
             now[name] = x
         elif kind == "scale":
             now[name] = x * p[0]

@@ -560,3 +560,49 @@ def test_snake_controller_refuses_a_graph_of_another_shape(tmp_path):
     with pytest.raises(UserError) as e:
         snake_nir.graph_controller(graph, rstdp.NetworkConfig(topology="basic", learn=False))
     _one_line(e, "dvs (10)", "gait (3)")
+
+
+def test_the_hexapod_visual_snn_as_a_nir_graph_spikes_as_its_slotted_mode(tmp_path):
+    """Sec. IV's layers exported (Conv2d, discrete LIF, Flatten, Linear), written, read and imported.
+
+    Driven by the same event images slot after slot, every layer spikes as
+    `spikejax.vision.edges.sync_step` does, neuron for neuron (the graph leaks
+    every step, `edges` lazily from each neuron's last update: equal to float32
+    rounding, which moves no spike here).
+    """
+    from robots.hexapod import vision
+    from spikejax.vision import edges
+
+    config = vision.scaled_config(40, 66, 10)  # 6 window columns, 6 columns beyond them ignored
+    params = vision.vision_params(config)
+    dt = 2e-3
+    g = spikejax_nir.read(spikejax_nir.write(tmp_path / "vision.nir", hexapod_nir.vision_graph(config, params, dt)))
+    net, p = spikejax_nir.from_nir(g)
+    rng = np.random.default_rng(0)
+    n_slots = 40
+    images = np.zeros((n_slots, config.height, config.width), np.int32)
+    for k in range(n_slots):  # a band of edge events sweeping right, low in the view, and noise
+        images[k, 15:, 5 + k : 8 + k] = 1
+        images[k][rng.random(images[k].shape) < 0.02] += 1
+    _, out = jax.jit(lambda x: spikejax_nir.network_run(net, p, spikejax_nir.network_init(net, p), {"events": x}))(
+        jnp.asarray(images.reshape(n_slots, -1), jnp.float32)
+    )
+
+    def slot(state, x):
+        image, t = x
+        return edges.sync_step(config, params, state, image, t)
+
+    _, ours = jax.lax.scan(slot, edges.init(config), (jnp.asarray(images), dt * (1 + jnp.arange(n_slots))))
+    rows, cols = config.used
+    n_rows_all = config.height // config.window
+    np.testing.assert_array_equal(np.asarray(out["filter"]).reshape(ours.filter.shape), np.asarray(ours.filter))
+    vertical = np.asarray(out["vertical"]).reshape(n_slots, n_rows_all, config.width)[:, : config.n_rows, :cols]
+    np.testing.assert_array_equal(vertical, np.asarray(ours.vertical))
+    horizontal = np.asarray(out["horizontal"]).reshape(n_slots, config.height, -1)[:, :rows, : config.n_cols]
+    np.testing.assert_array_equal(horizontal, np.asarray(ours.horizontal))
+    windows = np.stack(
+        [np.asarray(out[f"windows_{b}"]).reshape(n_slots, config.n_rows, config.n_cols) for b in "vh"], -1
+    )
+    np.testing.assert_array_equal(windows, np.asarray(ours.windows))
+    np.testing.assert_array_equal(np.asarray(out["gait_spikes"]), np.asarray(ours.out))
+    assert np.asarray(ours.windows).sum() > 50 and np.asarray(ours.out).sum(0).min() > 5
