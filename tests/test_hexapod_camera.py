@@ -99,3 +99,26 @@ def test_vmap_over_scenes_equals_single_runs(fixed_decisions):
     for i, s in enumerate(singles):
         for a, b in zip(jax.tree.leaves(s), jax.tree.leaves(batched)):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[i])
+
+
+def test_ordered_readout_is_eq1_2_input_by_input():
+    # By hand: three inputs of 0.4 fire once (1.2 > 1), two of 0.7 once; from 0.5 one of 0.7 fires at once.
+    fires, v = decisions.ordered_readout(
+        jnp.array([0.0, 0.0, 0.5, 0.0]), jnp.array([3, 5, 4, 2]), jnp.array([0.4, 0.4, 0.7, 0.7])
+    )
+    np.testing.assert_array_equal(fires, [1, 1, 2, 1])
+    np.testing.assert_allclose(v, [0.0, 0.8, 0.7, 0.0], atol=1e-6)
+    # Against a plain loop over the inputs, one at a time: v += w; fire and reset when v > 1.
+    rng = np.random.default_rng(0)
+    v0, n, w = rng.uniform(0, 1, 200), rng.integers(0, 40, 200), rng.choice([0.0, 0.3, 0.4, 0.7, 0.95], 200)
+    expected = []
+    for a, k, b in zip(v0, n, w):
+        f = 0
+        for _ in range(k):
+            a += b
+            if a > 1.0:
+                f, a = f + 1, 0.0
+        expected.append((f, a))
+    fires, v = decisions.ordered_readout(jnp.asarray(v0, jnp.float32), jnp.asarray(n), jnp.asarray(w, jnp.float32))
+    np.testing.assert_array_equal(fires, [e[0] for e in expected])
+    np.testing.assert_allclose(v, [e[1] for e in expected], atol=1e-5)

@@ -39,7 +39,7 @@ from robots.hexapod.legs import servo_targets, step_params
 from robots.hexapod.vision import FORWARD, vision_params
 from spikejax.vision import dvs, edges
 
-__all__ = ["FRAME_S", "N_FRAMES", "CAPACITY", "g1_step_tracks", "Decision", "decide", "truth"]
+__all__ = ["FRAME_S", "N_FRAMES", "CAPACITY", "g1_step_tracks", "ordered_readout", "Decision", "decide", "truth"]
 
 FRAME_S = 0.02
 N_FRAMES = 17  # the standing frame and 16 frames over the 0.32 s cycle
@@ -83,6 +83,26 @@ def _to_scene_frame(track: jax.Array, start: jax.Array) -> jax.Array:
     return jnp.stack([x, y, track[:, 2], track[:, 3], track[:, 4], track[:, 5] + start[2]], axis=-1)
 
 
+def ordered_readout(v, n, w, v_th=1.0):
+    """A readout neuron given ``n`` input spikes of weight ``w`` one after another: ``(fires, v)``.
+
+    Eq. (1)-(2) of the hexapod paper with no leak between the inputs (they
+    come in one frame): from ``v`` the first spike is fired by the
+    ``k1 = floor((v_th - v) / w) + 1``-th input, then, from the reset to 0, every
+    ``m = floor(v_th / w) + 1``-th (three at 0.4, two at 0.7). This is what the
+    readout would do if the frame's layer-3 spikes reached it at their own
+    event times, as in the paper's event-driven network; `edges.sync_step`'s
+    readout takes them all at once and fires at most once a frame.
+    """
+    safe_w = jnp.where(w > 0, w, 1.0)
+    k1 = jnp.floor((v_th - v) / safe_w) + 1
+    m = jnp.floor(v_th / safe_w) + 1
+    n = n.astype(jnp.float32)
+    fires = jnp.where((w > 0) & (n >= k1), 1 + jnp.floor((n - k1) / m), 0.0)
+    v_end = jnp.where(fires > 0, (n - k1 - (fires - 1) * m) * w, v + n * w)
+    return fires.astype(jnp.int32), v_end
+
+
 class Decision(NamedTuple):
     """One scene's step.
 
@@ -90,6 +110,8 @@ class Decision(NamedTuple):
         gait: the winner-take-all's choice (0 G1, 1 G2 left, 2 G3 right).
         truth: `prey.truth_gait` at the start.
         out_counts: the gait neurons' spikes over the step, ``(3,)``.
+        gait_ordered, ordered_counts: the same with the frame's layer-3 spikes
+            reaching the gait neurons one by one (`ordered_readout`).
         window_counts: layer-3 spikes, ``(8, 12, 2)``.
         events, filter_spikes, layer2_spikes: totals over the step.
         overflow: events that did not fit in `CAPACITY` (0 when all fit).
@@ -98,6 +120,8 @@ class Decision(NamedTuple):
     gait: jax.Array
     truth: jax.Array
     out_counts: jax.Array
+    gait_ordered: jax.Array
+    ordered_counts: jax.Array
     window_counts: jax.Array
     events: jax.Array
     filter_spikes: jax.Array
@@ -130,24 +154,36 @@ def decide(track: jax.Array, scene: prey_mod.PreyScene, key: jax.Array, with_spi
     dvs_state = dvs.init(_DVS, images[0], times[0], key=k_init)
     snn = edges.init(config, times[0])
 
+    w_out = jnp.max(params.readout, axis=(1, 2, 3))  # one weight a gait neuron (0.4, 0.7, 0.7)
+    inputs_of = params.readout > 0
+
     def body(carry, inputs):
-        dvs_state, snn, overflow = carry
+        dvs_state, snn, overflow, (v_ord, t_ord, n_ord) = carry
         image, t, k = inputs
         dvs_state, events, lost = dvs.step(_DVS, dvs_state, image, t, capacity=CAPACITY, key=k)
         count = edges.count_image(config, events)
         snn, spikes = edges.sync_step(config, params, snn, count, t)
+        n_in = jnp.sum(inputs_of & spikes.windows[None], axis=(1, 2, 3))
+        touched = n_in > 0
+        v_leaked = v_ord * jnp.exp(-(t - t_ord) / params.tau_out)
+        fires, v_new = ordered_readout(v_leaked, n_in, w_out, params.v_th)
+        ordered = (jnp.where(touched, v_new, v_ord), jnp.where(touched, t, t_ord), n_ord + fires)
         out = (count, spikes) if with_spikes else None
-        return (dvs_state, snn, overflow + lost), out
+        return (dvs_state, snn, overflow + lost, ordered), out
 
     keys = jax.random.split(k_steps, N_FRAMES - 1)
-    (_, snn, overflow), per_frame = jax.lax.scan(
-        body, (dvs_state, snn, jnp.zeros((), jnp.int32)), (images[1:], times[1:], keys)
+    zeros = jnp.zeros((config.n_out,), jnp.float32)
+    ordered0 = (zeros, zeros + times[0], jnp.zeros((config.n_out,), jnp.int32))
+    (_, snn, overflow, (_, _, n_ordered)), per_frame = jax.lax.scan(
+        body, (dvs_state, snn, jnp.zeros((), jnp.int32), ordered0), (images[1:], times[1:], keys)
     )
     c = snn.counts
     decision = Decision(
         gait=edges.winner(c["out"], jnp.int32(FORWARD)),
         truth=truth(scene, _to_scene_frame(jnp.asarray(track[:1], jnp.float32), scene.start)[0]),
         out_counts=c["out"],
+        gait_ordered=edges.winner(n_ordered, jnp.int32(FORWARD)),
+        ordered_counts=n_ordered,
         window_counts=c["windows"],
         events=c["events"],
         filter_spikes=c["filter"],

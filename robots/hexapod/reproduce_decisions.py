@@ -7,8 +7,11 @@ rest and its own DVS noise (`robots.hexapod.decisions`). Writes, in ``--out DIR`
 
 - ``hexapod_decisions.csv``: accuracy (the winner-take-all's gait equal to
   `prey.truth_gait`) with its 95 % Wilson interval, overall, by number of prey,
-  by the nearest prey's distance from the camera, and by the truth's gait;
-- ``hexapod_confusion.csv``: the confusion matrix (truth by decision);
+  by the nearest prey's distance from the camera, and by the truth's gait, for
+  both readouts: ``frame`` (`edges.sync_step`'s, at most one gait spike a
+  frame) and ``ordered`` (the frame's layer-3 spikes reaching the gait neurons
+  one by one, `decisions.ordered_readout`);
+- ``hexapod_confusion.csv``: the confusion matrices (truth by decision), both readouts;
 - ``hexapod_decisions.png``: the Fig. 7 counterpart for a near and a far scene:
   the step's DVS events, the filter's spikes, the layer-3 windows' spikes (the
   far/left/right regions outlined) and the gait neurons' counts.
@@ -33,7 +36,8 @@ from robots.hexapod.vision import regions
 from spikejax.commands import Command, count, output_directory
 from spikejax.stats import wilson_interval
 
-HEADER = ["group", "value", "scenes", "correct", "accuracy", "ci_low", "ci_high"]
+HEADER = ["readout", "group", "value", "scenes", "correct", "accuracy", "ci_low", "ci_high"]
+READOUTS = {"frame": "gait", "ordered": "gait_ordered"}  # column of the CSV -> field of the Decision
 DISTANCE_BINS = (0.3, 0.35, 0.4, 0.45, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 _CHUNK = 64
 
@@ -91,10 +95,16 @@ def _plot(path: Path, examples) -> None:
         row[2].axvline(region.shape[1] / 2 - 0.5, ymin=0, ymax=1 - far / region.shape[0], color="c", lw=1)
         row[2].set_title(f"layer-3 spikes per {win} px window (both branches)", fontsize=9)
         out = np.asarray(decision.out_counts)
-        row[3].bar(["G1 fwd", "G2 left", "G3 right"], out, color=["0.5", "tab:blue", "tab:orange"])
+        ordered = np.asarray(decision.ordered_counts)
+        names = ["G1 fwd", "G2 left", "G3 right"]
+        row[3].bar(np.arange(3) - 0.2, out, 0.4, color="0.5", label="frame readout")
+        row[3].bar(np.arange(3) + 0.2, ordered, 0.4, color="tab:orange", label="ordered readout")
+        row[3].set_xticks(range(3), names)
+        row[3].legend(fontsize=7)
         row[3].set_title(
-            f"gait neurons: chose {GAIT_NAMES[int(decision.gait)]}, truth {GAIT_NAMES[int(decision.truth)]}",
-            fontsize=9,
+            f"chose {names[int(decision.gait)]} (frame), {names[int(decision.gait_ordered)]} (ordered); "
+            f"truth {names[int(decision.truth)]}",
+            fontsize=8,
         )
         for ax in row[:3]:
             ax.set_xticks([])
@@ -135,6 +145,7 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
                 parts.append(
                     {
                         "gait": np.asarray(d.gait)[: stop - start],
+                        "gait_ordered": np.asarray(d.gait_ordered)[: stop - start],
                         "truth": np.asarray(d.truth)[: stop - start],
                         "nearest": np.asarray(near)[: stop - start],
                         "overflow": np.asarray(d.overflow)[: stop - start],
@@ -144,12 +155,15 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
                 bar.update(stop - start)
         res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         n_prey = 1 + np.arange(scenes_n) % prey_mod.MAX_PREY
-        rows, confusion = summarize(res["gait"], res["truth"], n_prey, res["nearest"])
+        rows, confusions = [], {}
+        for readout, field in READOUTS.items():
+            r, confusions[readout] = summarize(res[field], res["truth"], n_prey, res["nearest"])
+            rows += [[readout, *row] for row in r]
         write_csv(out / "hexapod_decisions.csv", HEADER, rows)
         write_csv(
             out / "hexapod_confusion.csv",
-            ["truth", *(f"chose {g}" for g in GAIT_NAMES)],
-            [[GAIT_NAMES[g], *confusion[g].tolist()] for g in range(3)],
+            ["readout", "truth", *(f"chose {g}" for g in GAIT_NAMES)],
+            [[k, GAIT_NAMES[g], *c[g].tolist()] for k, c in confusions.items() for g in range(3)],
         )
         examples = []
         for title, want in (
@@ -164,9 +178,10 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
         if examples:
             _plot(out / "hexapod_decisions.png", examples)
         for r in rows:
-            print(f"{r[0]:<10}{r[1]:<16}{r[2]:>6}  {r[4]:.3f} [{r[5]:.3f}, {r[6]:.3f}]")
-        print("confusion (rows truth, columns chosen: G1, G2, G3):")
-        print(confusion)
+            print(f"{r[0]:<9}{r[1]:<10}{r[2]:<16}{r[3]:>6}  {r[5]:.3f} [{r[6]:.3f}, {r[7]:.3f}]")
+        for k, c in confusions.items():
+            print(f"confusion, {k} readout (rows truth, columns chosen: G1, G2, G3):")
+            print(c)
         print(f"events a step: median {int(np.median(res['events']))}; clipped crossings a step: "
               f"median {int(np.median(res['overflow']))} (dvs max_per_pixel and capacity overflow)")  # fmt: skip
         print(
