@@ -7,7 +7,9 @@ rest and its own DVS noise (`robots.hexapod.decisions`). Writes, in ``--out DIR`
 
 - ``hexapod_decisions.csv``: accuracy (the winner-take-all's gait equal to
   `prey.truth_gait`) with its 95 % Wilson interval, overall, by number of prey,
-  by the nearest prey's distance from the camera, and by the truth's gait, for
+  by the nearest prey's distance from the camera, by its gap to the second
+  nearest, by the truth's gait, and over the scenes with one near prey and at
+  least one far one (ACCEPTANCE A6's "nearest" mechanism), for
   both readouts: ``frame`` (`edges.sync_step`'s, at most one gait spike a
   frame) and ``ordered`` (the frame's layer-3 spikes reaching the gait neurons
   one by one, `decisions.ordered_readout`);
@@ -58,8 +60,15 @@ def _row(group, value, ok) -> list:
     return [group, value, n, k, round(k / max(n, 1), 4), round(float(low), 4), round(float(high), 4)]
 
 
-def summarize(gait, truth, n_prey, nearest) -> tuple[list[list], np.ndarray]:
-    """The rows of ``hexapod_decisions.csv`` and the confusion matrix ``(3, 3)`` (truth by decision)."""
+GAP_BINS = (0.0, 0.25, 0.5, 1.0, np.inf)
+
+
+def summarize(gait, truth, n_prey, nearest, second=None) -> tuple[list[list], np.ndarray]:
+    """The rows of ``hexapod_decisions.csv`` and the confusion matrix ``(3, 3)`` (truth by decision).
+
+    ``second``: the second-nearest prey's distance (inf with one prey), for the
+    rows by gap and for the scenes with one near prey and at least one far one.
+    """
     ok = gait == truth
     rows = [_row("all", "", ok)]
     rows += [_row("prey", str(k), ok[n_prey == k]) for k in range(1, prey_mod.MAX_PREY + 1)]
@@ -68,13 +77,24 @@ def summarize(gait, truth, n_prey, nearest) -> tuple[list[list], np.ndarray]:
         if sel.any():
             rows.append(_row("nearest_m", f"{lo:g}-{hi:g}", ok[sel]))
     rows += [_row("truth", GAIT_NAMES[g], ok[truth == g]) for g in range(3) if (truth == g).any()]
+    if second is not None:
+        gap = second - nearest
+        for lo, hi in zip(GAP_BINS[:-1], GAP_BINS[1:]):
+            sel = np.isfinite(gap) & (gap >= lo) & (gap < hi)
+            if sel.any():
+                rows.append(_row("gap_m", f"{lo:g}-{hi:g}", ok[sel]))
+        near_far = (truth != 0) & np.isfinite(second) & (second > cam.D_NEAR + 0.05)
+        if near_far.any():
+            rows.append(_row("near_and_far", "", ok[near_far]))
     confusion = np.zeros((3, 3), np.int64)
     np.add.at(confusion, (truth, gait), 1)
     return rows, confusion
 
 
 def _nearest_from_camera(scene: prey_mod.PreyScene, track0) -> jax.Array:
-    return prey_mod.nearest(scene, cam.ground_pose(track0))[1]
+    """The nearest and second-nearest living prey's distances from the camera (inf where none)."""
+    dist, _ = prey_mod.relative(scene, cam.ground_pose(track0))
+    return jnp.sort(jnp.where(scene.alive, dist, jnp.inf))[:2]
 
 
 def _plot(path: Path, examples) -> None:
@@ -147,7 +167,8 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
                         "gait": np.asarray(d.gait)[: stop - start],
                         "gait_ordered": np.asarray(d.gait_ordered)[: stop - start],
                         "truth": np.asarray(d.truth)[: stop - start],
-                        "nearest": np.asarray(near)[: stop - start],
+                        "nearest": np.asarray(near)[: stop - start, 0],
+                        "second": np.asarray(near)[: stop - start, 1],
                         "overflow": np.asarray(d.overflow)[: stop - start],
                         "events": np.asarray(d.events)[: stop - start],
                     }
@@ -157,7 +178,7 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
         n_prey = 1 + np.arange(scenes_n) % prey_mod.MAX_PREY
         rows, confusions = [], {}
         for readout, field in READOUTS.items():
-            r, confusions[readout] = summarize(res[field], res["truth"], n_prey, res["nearest"])
+            r, confusions[readout] = summarize(res[field], res["truth"], n_prey, res["nearest"], res["second"])
             rows += [[readout, *row] for row in r]
         write_csv(out / "hexapod_decisions.csv", HEADER, rows)
         write_csv(
