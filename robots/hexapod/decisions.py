@@ -11,7 +11,11 @@ each frame's events, as a per-pixel count image, drive the visual SNN once at
 the frame's time (`spikejax.vision.edges.sync_step`, the paper's weights scaled
 to 20-pixel windows by `robots.hexapod.vision.vision_params`). The decision is
 the winner-take-all over the gait neurons' spike counts of the whole step
-(`edges.winner`, G1 kept on silence: the robot starts forward).
+(`edges.winner`, G1 kept on silence: the robot starts forward). A second
+readout is computed beside it from the same layer-3 spikes, `ordered_readout`:
+the frame's window spikes reach the gait neurons one at a time, as in an
+event-driven network, instead of all at once (where a gait neuron fires at
+most once a frame).
 
 The truth (`prey.truth_gait`) is measured from the camera's ground point at the
 start: forward while the nearest living prey's centre is beyond
