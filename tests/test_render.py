@@ -290,3 +290,97 @@ def test_entry_face_shows_the_ring_and_a_closed_far_end():
     np.testing.assert_allclose(row[cols < inner - 0.5], 0.05)  # bore wall, then the far cap: both dark
     np.testing.assert_allclose(row[(cols > inner + 0.5) & (cols < outer - 0.5)], 0.9)  # the entry face
     np.testing.assert_allclose(row[cols > outer + 0.5], 0.75)  # sky around the pipe
+
+
+_BOX_XML = """
+<mujoco>
+  <compiler angle="degree"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 1"/>
+    <geom name="cube" type="box" pos="1.5 0.3 0.05" size="0.05 0.05 0.05" euler="0 0 0"/>
+    <geom name="slab" type="box" pos="2.5 -0.6 0.2" size="0.3 0.1 0.2" euler="0 0 35"/>
+    <geom name="post" type="box" pos="3.5 0.8 0.4" size="0.08 0.15 0.4" euler="0 0 -70"/>
+  </worldbody>
+</mujoco>
+"""
+
+
+def _box_scene(valid=(True, True, True)):
+    return render.Scene(
+        render.no_spheres(),
+        render.no_cylinders(),
+        boxes=render.boxes(
+            [[1.5, 0.3, 0.05], [2.5, -0.6, 0.2], [3.5, 0.8, 0.4]],
+            [[0.05, 0.05, 0.05], [0.3, 0.1, 0.2], [0.08, 0.15, 0.4]],
+            np.radians([0.0, 35.0, -70.0]),
+            0.1,
+            jnp.asarray(valid),
+        ),
+    )
+
+
+def test_box_ray_distances_match_mujoco_mj_ray():
+    model = mujoco.MjModel.from_xml_string(_BOX_XML)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    rng = np.random.default_rng(1)
+    origin = np.array([0.0, 0.05, 0.12])
+    # Rays aimed at random points in each box (faces seen edge-on to face-on, top faces from above) and the floor.
+    targets = np.concatenate(
+        [data.geom_xpos[g] + rng.uniform(-1, 1, (25, 3)) * model.geom_size[g] * 1.3 for g in (1, 2, 3)]
+        + [rng.uniform([0.5, -2, -0.2], [5, 2, 0.0], (15, 3))]
+    )
+    dirs = targets - origin
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    t, _ = render.intersect(_box_scene(), jnp.asarray(origin, jnp.float32), jnp.asarray(dirs, jnp.float32))
+    expected = np.array([mujoco.mj_ray(model, data, origin, d, None, 1, -1, np.zeros(1, np.int32)) for d in dirs])
+    hit = expected >= 0
+    assert hit.sum() >= 70
+    np.testing.assert_allclose(np.asarray(t)[hit], expected[hit], rtol=1e-4, atol=1e-4)
+    # A hidden slot is never hit: the rays that met the cube now go on to what is behind it.
+    t_hidden, _ = render.intersect(
+        _box_scene((False, True, True)), jnp.asarray(origin, jnp.float32), jnp.asarray(dirs[:25], jnp.float32)
+    )
+    model.geom_rgba[1, 3] = 0.0  # mj_ray skips transparent geoms
+    cube_gone = np.array([mujoco.mj_ray(model, data, origin, d, None, 1, -1, np.zeros(1, np.int32)) for d in dirs[:25]])
+    np.testing.assert_allclose(np.asarray(t_hidden), np.where(cube_gone >= 0, cube_gone, 1e6), rtol=1e-4, atol=1e-4)
+
+
+def test_box_faces_are_shaded_by_their_normals_and_project_as_pinhole():
+    # A cube ahead seen face-on under a light along -x of the camera: its front face gets the full light.
+    camera = render.Camera(width=96, height=96, supersample=1)
+    scene = render.Scene(
+        render.no_spheres(),
+        render.no_cylinders(),
+        ground_height=-100.0,
+        light=(-1.0, 0.0, 0.0),
+        ambient=0.2,
+        boxes=render.boxes([2.0, 0.0, 1.0], 0.25, 0.0, 0.5),
+    )
+    img = np.asarray(render.render(scene, jnp.array([0.0, 0.0, 1.0]), jnp.eye(3), camera))
+    dark = np.asarray(render.depth(scene, jnp.array([0.0, 0.0, 1.0]), jnp.eye(3), camera)) < 10.0
+    # Front face at x = 1.75: half width 0.25 m spans f * 0.25 / 1.75 pixels either side of the centre.
+    half_px = camera.focal * 0.25 / 1.75
+    cols = np.nonzero(dark.any(axis=0))[0]
+    assert cols.min() == pytest.approx(48 - half_px, abs=1.0) and cols.max() + 1 == pytest.approx(48 + half_px, abs=1.0)
+    np.testing.assert_allclose(img[48, 48], 0.5)  # lambert 1 on the face turned towards the light
+    # Turned by 45 deg about z, the two visible faces get cos 45 deg each: 0.5 (0.2 + 0.8 cos 45).
+    turned = scene._replace(boxes=render.boxes([2.0, 0.0, 1.0], 0.25, math.radians(45.0), 0.5))
+    img = np.asarray(render.render(turned, jnp.array([0.0, 0.0, 1.0]), jnp.eye(3), camera))
+    np.testing.assert_allclose(img[48, 44], 0.5 * (0.2 + 0.8 * math.cos(math.radians(45.0))), rtol=1e-5)
+    np.testing.assert_allclose(img[48, 52], 0.5 * (0.2 + 0.8 * math.cos(math.radians(45.0))), rtol=1e-5)
+
+
+def test_boxes_render_batched_under_vmap_with_traced_positions():
+    camera = render.Camera(width=32, height=24)
+    base = render.Scene(render.no_spheres(), render.no_cylinders(), boxes=render.boxes([2.0, 0.0, 0.1], 0.1))
+    xs = jnp.array([1.5, 2.0, 3.0])
+
+    def one(x):
+        scene = base._replace(boxes=base.boxes._replace(center=jnp.stack([x, 0.0, 0.1])[None]))
+        return render.render(scene, jnp.array([0.0, 0.0, 0.15]), jnp.eye(3), camera)
+
+    batch = jax.jit(jax.vmap(one))(xs)
+    for i, x in enumerate(np.asarray(xs)):
+        np.testing.assert_allclose(batch[i], one(x), atol=1e-6)
+    assert not np.allclose(batch[0], batch[2])

@@ -1,11 +1,12 @@
-"""A pinhole camera that ray-casts spheres, open cylinders, flat annuli and a ground plane in JAX.
+"""A pinhole camera that ray-casts spheres, open cylinders, flat annuli, boxes and a ground plane in JAX.
 
 Each pixel casts one ray (or ``supersample**2`` rays, averaged) from the camera
 centre and takes the brightness of the nearest surface it hits. Intersections
 are closed forms (a quadratic per sphere and per cylinder, a division for the
 plane), so a 128 x 128 frame of a few primitives is a handful of fused array
 operations that ``jit`` and ``vmap`` like any other JAX function (an annulus
-or disc is one plane intersection and a radius test); the camera
+or disc is one plane intersection and a radius test, a box the slab test of
+Kay and Kajiya in its own yawed frame); the camera
 pose is a traced input, so a batch of robots renders a batch of frames in the
 same compiled program as their physics.
 
@@ -31,6 +32,8 @@ Conventions
 * A pipe with a wall (`Pipes`) is drawn by `pipe_primitives` as its outer
   tube, its bore (a second tube of radius ``radius - wall``), the annular
   entry face and a disc closing the far end.
+* A box (`Boxes`) is axis-aligned in its own frame, turned by ``yaw`` about
+  the world z axis: a cuboid standing on the floor, as the hexapod's prey are.
 * Brightness is in [0, 1]: each primitive has its own, optionally shaded by a
   directional light (``ambient + (1 - ambient) * max(0, n . light)``).
 """
@@ -53,11 +56,14 @@ __all__ = [
     "Cylinders",
     "Annuli",
     "Pipes",
+    "Boxes",
     "Scene",
     "spheres",
     "no_spheres",
     "no_cylinders",
     "no_annuli",
+    "boxes",
+    "no_boxes",
     "pipe_primitives",
     "standing_cylinder",
     "lying_cylinder",
@@ -216,12 +222,45 @@ def no_annuli() -> Annuli:
     return Annuli(jnp.zeros((0, 3)), jnp.zeros((0, 3)), z, z, z)
 
 
-class Scene(NamedTuple):
-    """What the camera sees: spheres, cylinders, flat rings, the ground and the sky.
+class Boxes(NamedTuple):
+    """``n`` solid cuboids, each axis-aligned in its own frame turned by ``yaw`` about the world z axis.
 
-    The numbers of spheres, cylinders and rings are static (array shapes);
-    any may be zero (``annuli=None`` is none). All fields may be traced (a
-    moving target is a traced centre).
+    ``center (n, 3)``, ``half (n, 3)`` half edges along the box's own x, y, z
+    (the box's x axis is at angle ``yaw (n,)`` from the world x axis),
+    ``brightness (n,)``. ``valid (n,)`` (bool) hides the unused slots of a
+    fixed-size scene (a removed prey).
+    """
+
+    center: jax.Array
+    half: jax.Array
+    yaw: jax.Array
+    brightness: jax.Array
+    valid: jax.Array
+
+
+def boxes(center, half, yaw=0.0, brightness=0.1, valid=True) -> Boxes:
+    """Boxes from array-likes; one box may be given unbatched (``center`` of shape (3,)); scalars broadcast."""
+    center = jnp.asarray(center, jnp.float32).reshape(-1, 3)
+    n = center.shape[0]
+    return Boxes(
+        center,
+        jnp.broadcast_to(jnp.asarray(half, jnp.float32), (n, 3)),
+        jnp.broadcast_to(jnp.asarray(yaw, jnp.float32), (n,)),
+        jnp.broadcast_to(jnp.asarray(brightness, jnp.float32), (n,)),
+        jnp.broadcast_to(jnp.asarray(valid, bool), (n,)),
+    )
+
+
+def no_boxes() -> Boxes:
+    return boxes(jnp.zeros((0, 3)), 1.0)
+
+
+class Scene(NamedTuple):
+    """What the camera sees: spheres, cylinders, flat rings, boxes, the ground and the sky.
+
+    The numbers of spheres, cylinders, rings and boxes are static (array
+    shapes); any may be zero (``annuli=None`` or ``boxes=None`` is none). All
+    fields may be traced (a moving target is a traced centre).
     """
 
     spheres: Spheres
@@ -232,6 +271,7 @@ class Scene(NamedTuple):
     light: jax.Array | tuple = (0.3, -0.2, 0.93)  # direction towards the light, world frame
     ambient: jax.Array | float = 0.6
     annuli: Annuli | None = None
+    boxes: Boxes | None = None
 
 
 def spheres(center, radius, brightness) -> Spheres:
@@ -407,6 +447,40 @@ def intersect(scene: Scene, origin, dirs) -> tuple[jax.Array, jax.Array]:
         # The face turned towards the camera: its normal points against the ray.
         facing = jnp.where(dn < 0, 1.0, -1.0)
         shade = _shade(scene, ann.brightness[i], facing * nx, facing * ny, facing * nz)
+        t_best, b_best = keep_nearest(t, shade)
+
+    box = scene.boxes
+    for i in range(0 if box is None else box.center.shape[0]):
+        # Slab test in the box's frame (world turned by -yaw about z): per axis the ray is between the
+        # two faces for t in [min(t1, t2), max(t1, t2)], t1,2 = (+-half - w) / d; it hits the box when the
+        # latest entry comes before the earliest exit. The entry's axis names the face hit.
+        c, s = jnp.cos(box.yaw[i]), jnp.sin(box.yaw[i])
+        wx, wy, wz = ox - box.center[i, 0], oy - box.center[i, 1], oz - box.center[i, 2]
+        local_w = (c * wx + s * wy, -s * wx + c * wy, wz)
+        local_d = (c * dx + s * dy, -s * dx + c * dy, dz)
+        near, far, axis, sign = None, None, None, None
+        for k in range(3):
+            h = box.half[i, k]
+            dk = local_d[k]
+            inv = 1.0 / jnp.where(jnp.abs(dk) > 1e-12, dk, 1e-12)
+            ta, tb = (-h - local_w[k]) * inv, (h - local_w[k]) * inv
+            lo, hi = jnp.minimum(ta, tb), jnp.maximum(ta, tb)
+            face = jnp.where(dk > 0, -1.0, 1.0)  # the face entered has its normal against the ray
+            if k == 0:
+                near, far, axis, sign = lo, hi, jnp.zeros(lo.shape, jnp.int32), face
+            else:
+                later = lo > near
+                near = jnp.where(later, lo, near)
+                axis = jnp.where(later, k, axis)
+                sign = jnp.where(later, face, sign)
+                far = jnp.minimum(far, hi)
+        hit = box.valid[i] & (near <= far) & (far > eps)
+        # From inside (near <= eps) the ray meets the far wall; a solid box is never seen that way from outside.
+        t = jnp.where(hit, jnp.where(near > eps, near, far), _FAR)
+        lx = jnp.where(axis == 0, sign, 0.0)
+        ly = jnp.where(axis == 1, sign, 0.0)
+        lz = jnp.where(axis == 2, sign, 0.0)
+        shade = _shade(scene, box.brightness[i], c * lx - s * ly, s * lx + c * ly, lz)
         t_best, b_best = keep_nearest(t, shade)
 
     bright = jnp.where(t_best < _FAR, b_best, scene.sky_brightness)

@@ -1,0 +1,124 @@
+"""The hexapod's head camera and its open-loop prey decisions (robots/hexapod/camera.py, decisions.py)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from robots.hexapod import camera as cam
+from robots.hexapod import decisions, physics, prey
+from robots.hexapod.vision import FORWARD, LEFT, RIGHT
+from spikejax.vision import render
+
+
+def test_camera_sits_on_the_mjcf_site_above_the_standing_torso():
+    model = physics.load_model()
+    qpos = physics.standing_state(model)[1 : 1 + model.nq]
+    assert cam.site_offset() == pytest.approx((0.1, 0.0, 0.04))
+    assert cam.camera_height() == pytest.approx(qpos[2] + 0.04, abs=1e-3)
+    # d_near = h / tan(tilt + atan(20 / f)), f = 128 / tan(30 deg): SPEC 4.4 at our sensor.
+    f = 128 / math.tan(math.radians(30))
+    expected = cam.camera_height() / math.tan(math.radians(cam.TILT_DEG) + math.atan(20 / f))
+    assert cam.D_NEAR == pytest.approx(expected, rel=1e-9)
+    assert cam.d_near(0.0) == pytest.approx(1.21, abs=0.01)  # SPEC 4.4's level example scaled to h = 0.109 m
+
+
+def test_pose_follows_the_torso_yaw_and_the_tilt():
+    torso = jnp.array([1.0, 2.0, 0.07, 0.0, 0.0, math.pi / 2])
+    pos, rot = cam.pose(torso)
+    t = math.radians(cam.TILT_DEG)
+    np.testing.assert_allclose(pos, [1.0, 2.1, 0.11], atol=1e-6)  # the site 0.1 m ahead, i.e. along +y
+    np.testing.assert_allclose(rot[:, 0], [0.0, math.cos(t), -math.sin(t)], atol=1e-6)  # forward, pitched down
+    np.testing.assert_allclose(rot[:, 1], [-1.0, 0.0, 0.0], atol=1e-6)  # left
+    np.testing.assert_allclose(rot.T @ rot, np.eye(3), atol=1e-6)
+
+
+def _scene(*prey_xy_alive):
+    xy = np.full((prey.MAX_PREY, 2), 50.0, np.float32)
+    alive = np.zeros(prey.MAX_PREY, bool)
+    for i, (x, y, a) in enumerate(prey_xy_alive):
+        xy[i], alive[i] = (x, y), a
+    return prey.PreyScene(jnp.zeros(3), jnp.asarray(xy), jnp.full((prey.MAX_PREY,), 0.1), jnp.asarray(alive))
+
+
+def test_a_prey_at_d_near_puts_its_base_on_the_near_far_boundary_row():
+    torso = jnp.array([0.0, 0.0, cam.camera_height() - 0.04, 0.0, 0.0, 0.0])
+    cam_x = float(cam.pose(torso)[0][0])
+    # The front face D_NEAR ahead of the camera: its bottom edge at row 100 of 160 (5/8 from the top).
+    world = cam.prey_scene(_scene((cam_x + cam.D_NEAR + 0.05, 0.0, True)))
+    frame = jax.jit(cam.frame)
+    img = np.asarray(frame(torso, world))
+    column = img[:, 128]
+    dark = np.nonzero(column < 0.3)[0]
+    assert dark.max() + 1 == pytest.approx(100, abs=1)
+    # A dead slot is not drawn: the frame is the bare floor.
+    hidden = np.asarray(frame(torso, cam.prey_scene(_scene((cam_x + cam.D_NEAR + 0.05, 0.0, False)))))
+    np.testing.assert_allclose(hidden, cam.FLOOR_BRIGHTNESS, atol=1e-6)
+    assert isinstance(world.boxes, render.Boxes)
+
+
+@pytest.fixture(scope="module")
+def fixed_decisions():
+    track = jnp.asarray(decisions.g1_step_tracks([(0.8, 1.0, 1.0)])[0])
+    cam_x = float(cam.ground_pose(track[0])[0])
+
+    def at(d, bearing_deg):
+        b = math.radians(bearing_deg)
+        return (cam_x + d * math.cos(b), d * math.sin(b), True)
+
+    scenes = [
+        _scene(at(1.5, 0.0)),  # far, ahead
+        _scene(at(0.34, 26.0), at(2.0, -5.0)),  # near on the left, a far one beside
+        _scene(at(0.30, -10.0)),  # near on the right
+    ]
+    batch = jax.tree.map(lambda *a: jnp.stack(a), *scenes)
+    key = jax.random.key(3)
+    batched = jax.jit(jax.vmap(decisions.decide, in_axes=(None, 0, None)))(track, batch, key)
+    single = jax.jit(decisions.decide)
+    return batched, [single(track, s, key) for s in scenes[:2]]
+
+
+def test_fixed_scenes_get_the_truths_gait(fixed_decisions):
+    # Scenes where the wiring wins; over random near scenes it does far less often (docs/BENCHMARKS.md).
+    d, _ = fixed_decisions
+    np.testing.assert_array_equal(d.truth, [FORWARD, LEFT, RIGHT])
+    np.testing.assert_array_equal(d.gait, [FORWARD, LEFT, RIGHT])
+    out = np.asarray(d.out_counts)
+    assert out[0, 0] > 0 and out[0, 1:].sum() == 0  # a far prey fires G1 alone
+    assert out[1, LEFT] > out[1, FORWARD] and out[1, RIGHT] == 0  # the turn away from the prey stays silent
+    assert out[2, RIGHT] > out[2, FORWARD] and out[2, LEFT] == 0
+    assert int(d.events.min()) > 0 and int(d.filter_spikes.min()) > 0
+    # The filter drops most events (the shot noise), layer 2 most filter spikes.
+    assert np.all(d.filter_spikes < d.events) and np.all(d.layer2_spikes < d.filter_spikes)
+
+
+def test_vmap_over_scenes_equals_single_runs(fixed_decisions):
+    batched, singles = fixed_decisions
+    for i, s in enumerate(singles):
+        for a, b in zip(jax.tree.leaves(s), jax.tree.leaves(batched)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[i])
+
+
+def test_ordered_readout_is_eq1_2_input_by_input():
+    # By hand: three inputs of 0.4 fire once (1.2 > 1), two of 0.7 once; from 0.5 one of 0.7 fires at once.
+    fires, v = decisions.ordered_readout(
+        jnp.array([0.0, 0.0, 0.5, 0.0]), jnp.array([3, 5, 4, 2]), jnp.array([0.4, 0.4, 0.7, 0.7])
+    )
+    np.testing.assert_array_equal(fires, [1, 1, 2, 1])
+    np.testing.assert_allclose(v, [0.0, 0.8, 0.7, 0.0], atol=1e-6)
+    # Against a plain loop over the inputs, one at a time: v += w; fire and reset when v > 1.
+    rng = np.random.default_rng(0)
+    v0, n, w = rng.uniform(0, 1, 200), rng.integers(0, 40, 200), rng.choice([0.0, 0.3, 0.4, 0.7, 0.95], 200)
+    expected = []
+    for a, k, b in zip(v0, n, w):
+        f = 0
+        for _ in range(k):
+            a += b
+            if a > 1.0:
+                f, a = f + 1, 0.0
+        expected.append((f, a))
+    fires, v = decisions.ordered_readout(jnp.asarray(v0, jnp.float32), jnp.asarray(n), jnp.asarray(w, jnp.float32))
+    np.testing.assert_array_equal(fires, [e[0] for e in expected])
+    np.testing.assert_allclose(v, [e[1] for e in expected], atol=1e-5)
