@@ -107,3 +107,51 @@ def test_bad_arguments_are_one_line_errors():
         pipe_env.PipeEnv(max_steps=0)
     with pytest.raises(UserError, match="event_threshold"):
         pipe_env.PipeEnv(event_threshold=2.0)
+
+
+def test_failure_labels_take_the_first_cause_that_applies():
+    from robots.snake.reproduce_pipe import LABELS, label_failures
+
+    # Episodes: a success; never detected; a lying pipe approached but not entered; steering mostly
+    # against the pipe's side; passed the pipe; lost for long; still approaching.
+    success = np.array([1, 0, 0, 0, 0, 0, 0], bool)
+    approached = np.array([1, 0, 1, 0, 0, 0, 0], bool)
+    lying = np.array([0, 0, 1, 0, 0, 0, 0], bool)
+    detected = np.array([9, 0, 9, 9, 9, 9, 9])
+    sign_right = np.array([1.0, 0.0, 1.0, 0.2, 0.9, 0.9, 0.9])
+    depth_end = np.array([0.2, -1.0, 0.1, -1.0, -0.5, 0.8, 0.8])
+    last_seen = np.array([0, 10**9, 0, 0, 20, 20, 1])
+    labels = label_failures(success, approached, lying, detected, sign_right, depth_end, last_seen, 8)
+    names = [None if i < 0 else LABELS[i] for i in labels]
+    assert names == [None, "never_detected", "missed_bore", "wrong_side", "overshoot", "lost", "timeout"]
+
+
+@pytest.mark.slow  # about 22 s, mostly compiling a second loop (the fast budget is spent above)
+def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
+    import csv
+
+    from robots.snake.reproduce_pipe import HEADER, LABELS, reproduce_command_run
+    from spikejax.stats import wilson_interval
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(
+        '[snake]\nx = 0.0\ny = 0.0\nyaw_deg = 0.0\n\n[[pipe]]\nkind = "standing"\nx = 1.3\ny = -0.6\n'
+        "radius = 0.125\nlength = 2.0\n"
+    )
+    out = tmp_path / "out"
+    assert reproduce_command_run(out=out, episodes=2, seconds=2.0, scene=str(scene), no_progress=True) == 0
+    with open(out / "snake_pipe.csv") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == HEADER and len(rows) == 2
+    row = dict(zip(HEADER, rows[1]))
+    assert row["situation"] == "pipe 1 (standing)" and int(row["episodes"]) == 2
+    k = int(row["successes"])
+    low, high = wilson_interval(k, 2)
+    assert float(row["wilson_low"]) == pytest.approx(float(low)) and float(row["wilson_high"]) == pytest.approx(
+        float(high)
+    )
+    # 2 s from 1.3 m: not reached; every failure has one label, and the two repeats of the scene agree.
+    assert k == 0
+    fails = [int(row[f"fail_{label}"]) for label in LABELS]
+    assert sum(fails) == 2 and max(fails) == 2
+    assert (out / "snake_pipe_trajectories.png").stat().st_size > 0
