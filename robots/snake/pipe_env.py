@@ -120,8 +120,9 @@ class PipeEnv(Env):
             `spikejax.vision.stream.tracker_params` with Alg. 3's known size
             of the target kind and this snake's camera-offset fit `SWING`).
         max_steps: control steps before the episode times out.
-        max_steer: ``C_o`` at full action, rad (0.1: a turn radius of about
-            0.8 m at 0.08 m/s; larger values stall the gait).
+        max_steer: ``C_o`` at full action, rad; 0.1 reached the most pipes of
+            0.05, 0.1 and 0.15 on standing pipes 25-28 degrees aside
+            (docs/ARCHITECTURE.md, "The closed pipe loop").
         event_threshold, event_capacity: the frame-difference DVS.
         compensate: the gait's head compensation.
         gait: the gait's parameters.
