@@ -1,0 +1,157 @@
+"""Controllers of the pipe-tracking loop: the paper's bang-bang law with a state machine, and two baselines.
+
+Each is an ``(init, act)`` pair of pure functions, like `robots.snake.steering`,
+with ``act(params, cstate, state) -> (cstate, action)`` called before every
+control step of `robots.snake.pipe_env.PipeEnv` on the env's last
+`brax.envs.base.State`; ``action[0] = C`` in ``{-1, 0, +1}`` (the env scales it
+by ``max_steer``: ``C_o = C * max_steer``, positive turning right).
+
+`bang_bang` is the decision maker of the snake pipe-tracking paper (Sec. 2.1
+and Alg. 3): ``C = sign(offset)``, the control the streaming detector
+(`spikejax.vision.stream`) gives at each slot's end and holds between
+detections. The paper has no phases (its pipe is in view from the start and
+it claims approach, not entry); ours are (`MODES`):
+
+* ``SEARCH``: nothing detected yet, or lost for more than ``lost_slots``
+  slots: go straight (``C = 0``). The starts put the pipe in view, so the
+  snake slithers on until a detection arrives.
+* ``APPROACH``: a detection steered within the last ``lost_slots`` slots:
+  ``C`` is the last detection's (bang-bang), held until the next one. While
+  the pipe is lost it is held too: a pipe that leaves the view while the
+  snake turns towards it leaves on the side the snake is turning to.
+* ``FINAL``: the blind last stretch. Once Alg. 3's distance to the pipe has
+  come below ``final_distance`` (the lying entry's ring leaves the top of the
+  image below about 0.6 m, SPEC.md section 5), the last C is dropped and the
+  snake goes straight for the dead-reckoned time ``final_distance / speed``
+  plus ``margin`` seconds: vision no longer tells where the pipe is.
+* ``INSIDE``: the dead-reckoned stretch is over (the head should be at or in
+  the pipe): straight on, ``C = 0``, until the episode ends.
+
+An estimated distance of 0 (unknown) never starts ``FINAL``. The baselines
+are `straight` (``C = 0`` always: the lower bound) and `privileged` (the same
+bang-bang fed the **true** offset from the central line, ``sign(offset_true)``
+from the env's metrics, updated at the slot ends like the detector's: the
+upper bound of what perfect detection gives this law).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from robots.snake.env import SNAKE_SPEED
+
+__all__ = [
+    "APPROACH",
+    "CONTROLLERS",
+    "FINAL",
+    "INSIDE",
+    "MODES",
+    "SEARCH",
+    "ControllerParams",
+    "ControllerState",
+    "SwitchParams",
+    "bang_bang",
+    "privileged",
+    "straight",
+    "switch",
+]
+
+SEARCH, APPROACH, FINAL, INSIDE = 0, 1, 2, 3
+MODES = ("search", "approach", "final", "inside")
+DT = 0.02  # s, the control step
+
+
+class ControllerParams(NamedTuple):
+    """Traced parameters of the state machine.
+
+    Attributes:
+        lost_slots: slots without a steering detection before APPROACH falls back to SEARCH.
+        final_distance: Alg. 3's distance, m, below which the blind FINAL stretch starts.
+        speed: forward speed for the dead reckoning, m/s.
+        margin: s added to the dead-reckoned FINAL stretch.
+    """
+
+    lost_slots: float | jax.Array = 8
+    final_distance: float | jax.Array = 0.6
+    speed: float | jax.Array = SNAKE_SPEED
+    margin: float | jax.Array = 2.0
+
+
+class ControllerState(NamedTuple):
+    mode: jax.Array  # int32, one of MODES' indices
+    control: jax.Array  # float32, the C in force
+    since_seen: jax.Array  # int32, slots since a steering detection
+    blind: jax.Array  # float32, s left of the dead-reckoned FINAL stretch
+
+
+def _init() -> ControllerState:
+    return ControllerState(
+        jnp.zeros((), jnp.int32), jnp.zeros((), jnp.float32), jnp.zeros((), jnp.int32), jnp.zeros((), jnp.float32)
+    )
+
+
+def _action(c):
+    return jnp.stack([c, jnp.zeros_like(c)])
+
+
+def _bang_bang_act(params: ControllerParams, cstate: ControllerState, state):
+    info = state.info
+    slot, ended = info["slot"], info["ended"]
+    seen = ended & (slot.body.valid | slot.entry.valid)
+    since = jnp.where(seen, 0, cstate.since_seen + ended.astype(jnp.int32))
+    mode = cstate.mode
+    d = info["d_est"]
+    close = seen & (d > 0) & (d < params.final_distance)
+    start_final = (mode <= APPROACH) & close
+    blind = jnp.where(start_final, params.final_distance / params.speed + params.margin, cstate.blind - DT)
+    searching = jnp.where(seen, APPROACH, jnp.where(since > params.lost_slots, SEARCH, mode))
+    mode = jnp.where(
+        start_final, FINAL, jnp.where(mode >= FINAL, jnp.where(blind <= 0, INSIDE, mode), searching)
+    ).astype(jnp.int32)
+    # A detection's C is followed; between detections (and while lost, up to lost_slots) the last one is held.
+    held = jnp.where(seen, slot.control.astype(jnp.float32), cstate.control)
+    control = jnp.where(mode == APPROACH, held, 0.0)
+    return ControllerState(mode, control, since, blind), _action(control)
+
+
+def _straight_act(params, cstate: ControllerState, state):
+    return cstate, _action(jnp.zeros((), jnp.float32))
+
+
+def _privileged_act(params, cstate: ControllerState, state):
+    ended = state.info["ended"]
+    truth = jnp.sign(state.metrics["offset_true"])
+    control = jnp.where(ended | (state.info["control_steps"] == 0), truth, cstate.control)
+    return cstate._replace(control=control, mode=jnp.full((), APPROACH, jnp.int32)), _action(control)
+
+
+bang_bang = (_init, _bang_bang_act)
+"""The paper's ``C = sign(offset)`` from the spiking detector, with the state machine of the module's notes."""
+
+straight = (_init, _straight_act)
+"""Go straight: ``C = 0`` (the lower bound)."""
+
+privileged = (_init, _privileged_act)
+"""The bang-bang law fed the true offset from the central line at each slot's end (the upper bound)."""
+
+CONTROLLERS = {"bang-bang": 0, "straight": 1, "privileged": 2}
+
+
+class SwitchParams(NamedTuple):
+    """`switch`'s parameters: the state machine's and ``which`` (int32, a `CONTROLLERS` value), both traced."""
+
+    machine: ControllerParams
+    which: jax.Array
+
+
+def _switch_act(params: SwitchParams, cstate: ControllerState, state):
+    outs = [act(params.machine, cstate, state) for act in (_bang_bang_act, _straight_act, _privileged_act)]
+    which = jnp.asarray(params.which, jnp.int32)
+    return jax.tree.map(lambda *xs: jnp.select([which == k for k in range(len(xs))], xs), *outs)
+
+
+switch = (_init, _switch_act)
+"""Any of `CONTROLLERS`, chosen by the traced ``params.which``: a batch compares controllers in one program."""

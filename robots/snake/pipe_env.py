@@ -1,0 +1,432 @@
+"""The snake's pipe-tracking task as a Brax ``Env``: slither to a pipe seen only through the spiking detector.
+
+The closed loop of the snake pipe-tracking paper (Sec. 2.1, Fig. 1): a DVS
+on the head, the spiking Hough grids (Alg. 1-2), the decision maker (Alg. 3)
+and the gait. `PipeEnv` subclasses `brax.envs.base.Env` and returns Brax's
+`brax.envs.base.State`, like `robots.snake.env.SnakeEnv`, on the world of
+`robots.snake.pipes` (no target sphere). One ``step`` is one 20 ms control
+step:
+
+1. the gait of Eq. (1) of the snake R-STDP paper (`robots.snake.gait.joint_targets`)
+   with ``C_o = action[0] * max_steer`` (positive turns right), held by the
+   servos while the physics (with the scene's pipes as mocap bodies,
+   `robots.snake.physics.PipeBodies`) advances;
+2. the head camera renders the pipe scene (`robots.snake.camera.pipe_scene`);
+3. the frame-difference DVS (`spikejax.vision.dvs.frame_difference`, the
+   paper's simulator mode) makes the step's events;
+4. the streaming detector (`spikejax.vision.stream`) runs the grids' Alg. 1
+   update on them with the head joint's encoder (Eq. 4-6), and every
+   ``slot_steps`` steps Alg. 2 (body / entry) and Alg. 3 (distance by Eq. 8
+   with the known size, offsets, ``C = sign(offset)``);
+5. truth (`robots.snake.pipes.truth`, ``line_offset`` from the central line,
+   ``reached``, ``entered``, ``collided``) for the metrics and ``done`` only.
+
+A slot ends at the same control step for every member of a batch (all
+episodes start at time 0), so `rollout` scans slots, each a scan of its
+steps, and runs Alg. 2 once per slot (``step(..., slot_end=True)``);
+the Brax ``step`` (``slot_end=None``) decides per step with a ``cond``,
+which under ``vmap`` pays for Alg. 2 every step.
+
+Spaces and records:
+
+* ``action`` ``(2,)`` in [-1, 1]: ``action[0]`` the steering (``action[1]``
+  is accepted and ignored: the paper's snake keeps its head compensation).
+* ``obs`` ``(32,)``: the 16 joint angles and the 16 joint velocities (the
+  encoders); nothing of the world. The controllers read the detector's
+  output from ``info``.
+* ``info["slot"]``: the last `spikejax.vision.stream.SlotOutput` (the
+  detections, Alg. 3's estimates and ``control``, the C in force);
+  ``info["ended"]`` whether this step ended a slot; ``info["tracker"]`` the
+  detector's state; ``info["events"]`` / ``info["overflow"]`` the step's
+  events and those that did not fit; ``info["scene"]`` the episode's
+  `robots.snake.pipes.PipeScene`.
+* ``metrics``: truth and estimate side by side for the target pipe (slot 0
+  of the scene): ``depth`` (along the optical axis, what Eq. 8 estimates),
+  ``offset_true`` (from the central line: the centre of mass averaged over
+  the last gait period, along its mean heading), ``lateral`` (across the
+  optical axis), ``d_est`` and ``offset_est`` (the steering detection's, at
+  slot ends), ``detected``, ``events``, ``overflow``, and the outcomes
+  ``reached``, ``entered``, ``collided``, ``success`` (latched).
+* ``reward``: progress towards the target pipe (decrease of the head's
+  distance to it, m), plus 1 at success: not the paper's (which has none),
+  for learning baselines.
+* ``done = 1`` on success (standing pipe: the head within 0.3 m of its
+  surface; lying pipe: the head in the bore, `robots.snake.pipes.entered`),
+  on a collision with a standing pipe, and at ``max_steps``.
+
+A lying pipe's wall is touched all the way in by a snake crawling in its
+bore, so a collision ends an episode only with a standing pipe; it is
+recorded for both.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from brax.envs.base import Env, State
+
+from robots.snake import camera as cam
+from robots.snake import pipes
+from robots.snake.calibration import SWING
+from robots.snake.gait import GaitParams, gait_params, gait_period, joint_targets
+from robots.snake.physics import joint_qpos_index, make_physics, start_at
+from spikejax.errors import UserError
+from spikejax.vision import detect, dvs, hough, stream
+
+__all__ = ["PipeEnv", "PipeEnvParams", "default_tracker", "rollout"]
+
+
+class PipeEnvParams(NamedTuple):
+    """The task's traced quantities (float32 scalars), kept in ``info["params"]``.
+
+    Attributes:
+        max_steer: ``C_o`` at full action, rad.
+        event_threshold: frame-difference threshold on grey levels in (0, 1].
+    """
+
+    max_steer: jax.Array
+    event_threshold: jax.Array
+
+
+def default_tracker(circle: bool = False, sub_slots: int = 5) -> stream.Tracker:
+    """The loop's detector: the paper's 180 x 180 line grid in sync mode, slots of ``sub_slots`` steps.
+
+    ``circle=True`` adds the circle grid (lying pipes' entries) at a reduced
+    size (centres every pixel, radii 4-35 px: the ring of a 0.5 m entry
+    between 0.8 and 7 m), steering by the entry when it is seen, else the body.
+    """
+    grid = hough.CircleGrid(n_r=32, r_min=4.0) if circle else None
+    det = detect.Detector(line=hough.LineGrid(), circle=grid, mode="sync", sub_slots=sub_slots)
+    return stream.Tracker(det, window=SWING.window, target="any" if circle else "body")
+
+
+class PipeEnv(Env):
+    """Reach (standing) or enter (lying) a pipe with the slithering snake (see the module docstring).
+
+    Args:
+        backend: physics backend, ``"mujoco"`` or ``"mjx"``.
+        scene: a fixed `robots.snake.pipes.PipeScene` (e.g. from
+            `robots.snake.pipes.load_scene`) used by every ``reset`` unless
+            it is given one; default: each reset samples a situation.
+        situation: the sampled situation's name (`robots.snake.pipes.SITUATIONS`)
+            when there is no scene; ``reset(key, scene=...)`` overrides both.
+        placement: the sampler's ranges and sizes.
+        tracker: the streaming detector's static configuration
+            (default `default_tracker`: the line grid, sync).
+        tracker_params: its traced parameters (default
+            `spikejax.vision.stream.tracker_params` with Alg. 3's known size
+            of the target kind and this snake's camera-offset fit `SWING`).
+        max_steps: control steps before the episode times out.
+        max_steer: ``C_o`` at full action, rad; 0.1 reached the most pipes of
+            0.05, 0.1 and 0.15 on standing pipes 25-28 degrees aside
+            (docs/ARCHITECTURE.md, "The closed pipe loop").
+        event_threshold, event_capacity: the frame-difference DVS.
+        compensate: the gait's head compensation.
+        gait: the gait's parameters.
+        physics_kwargs: passed to `robots.snake.physics.make_physics`.
+    """
+
+    def __init__(
+        self,
+        backend: str = "mujoco",
+        *,
+        scene: pipes.PipeScene | None = None,
+        situation: str = "standing-right",
+        placement: pipes.Placement = pipes.Placement(),
+        tracker: stream.Tracker | None = None,
+        tracker_params: stream.TrackerParams | None = None,
+        max_steps: int = 1500,
+        max_steer: float = 0.1,
+        event_threshold: float = 0.05,
+        event_capacity: int = 2048,
+        compensate: bool = True,
+        gait: GaitParams | None = None,
+        **physics_kwargs: Any,
+    ):
+        if situation not in pipes.SITUATIONS:
+            raise UserError(f"situation must be one of {', '.join(pipes.SITUATIONS)}, not {situation!r}")
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+            raise UserError(f"max_steps must be a whole number of control steps >= 1, got {max_steps!r}")
+        if event_capacity < 1:
+            raise UserError(f"event_capacity must be at least 1, got {event_capacity}")
+        if not 0 < event_threshold <= 1:
+            raise UserError(f"event_threshold must be in (0, 1], got {event_threshold}")
+        if not max_steer > 0:
+            raise UserError(f"max_steer must be positive, got {max_steer}")
+        self.scene = scene
+        self.situation = situation
+        self.placement = placement
+        bodies = pipes.default_bodies(1, placement) if scene is None else pipes.bodies_for(scene)
+        self.physics = make_physics(backend, pipes=bodies, **physics_kwargs)
+        model = self.physics.mj_model
+        self._joints = np.asarray(joint_qpos_index(model))
+        self._dofs = np.array([model.jnt_dofadr[model.joint(f"joint{i}").id] for i in range(1, 17)])
+        self.tracker = default_tracker() if tracker is None else tracker
+        if tracker_params is None:
+            kind = pipes.SITUATIONS[situation][0] if scene is None else int(np.asarray(scene.kind)[0])
+            size = 2 * (placement.lying_radius if kind == pipes.LYING else placement.standing_radius)
+            if scene is not None:
+                size = 2 * float(np.asarray(scene.radius)[0])
+            track = SWING.track_params(size=size, width=cam.HEAD_CAMERA.width, fov=cam.HEAD_CAMERA.fov)
+            tracker_params = stream.tracker_params(self.tracker, track=track)
+        self.tracker_params = tracker_params
+        self.max_steps = max_steps
+        self.event_capacity = int(event_capacity)
+        self.params = PipeEnvParams(jnp.float32(max_steer), jnp.float32(event_threshold))
+        self.compensate = bool(compensate)
+        self.gait = gait_params() if gait is None else gait
+        self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
+
+    # ------------------------------------------------------------ Brax interface
+
+    @property
+    def dt(self) -> float:
+        """Control step, s."""
+        return self.physics.dt * self.physics.substeps
+
+    @property
+    def slot_steps(self) -> int:
+        """Control steps per detector slot (the tracker's ``slot_steps``), as a host int."""
+        return int(np.asarray(self.tracker_params.slot_steps))
+
+    @property
+    def observation_size(self) -> int:
+        return 32
+
+    @property
+    def action_size(self) -> int:
+        return 2
+
+    @property
+    def backend(self) -> str:
+        return self.physics.backend
+
+    def sample_scene(self, key: jax.Array, situation: str | None = None) -> pipes.PipeScene:
+        """A random scene of ``situation`` (default the env's) from ``key``."""
+        kind, side = pipes.SITUATIONS[self.situation if situation is None else situation]
+        return pipes.sample(key, kind, side, self.placement)
+
+    def reset(self, rng: jax.Array, scene: pipes.PipeScene | None = None, params: PipeEnvParams | None = None) -> State:
+        """The snake at rest at the scene's start, the pipes placed; the detector empty.
+
+        ``scene`` defaults to the env's fixed scene, else a sample of its
+        situation from ``rng``; it may be traced, so a batch of placements
+        runs in one program (the pipes' sizes must be the model's).
+        """
+        if scene is None:
+            scene = self.scene if self.scene is not None else self.sample_scene(rng)
+        params = self.params if params is None else PipeEnvParams(*(jnp.asarray(x, jnp.float32) for x in params))
+        phys = self.physics.init()
+        phys = start_at(phys, scene.start[0], scene.start[1], scene.start[2])
+        phys = pipes.place_pipes(phys, scene)
+        frame = self._frame(phys, scene)
+        events, _ = dvs.frame_difference(frame, frame, phys.time, threshold=1.0, capacity=self.event_capacity)
+        tracker_state = stream.init(self.tracker, phys.time)
+        zero, no = jnp.zeros((), jnp.float32), jnp.zeros((), bool)
+        com = jnp.broadcast_to(phys.com_pos[:2], (2 * self.window, 2))
+        info = {
+            "rng": rng,
+            "params": params,
+            "scene": scene,
+            "frame": frame,
+            "events": events,
+            "overflow": jnp.zeros((), jnp.int32),
+            "tracker": tracker_state,
+            "slot": stream._nothing(self.tracker, tracker_state, phys.time),
+            "ended": no,
+            "com_ring": com,
+            "control_steps": jnp.zeros((), jnp.int32),
+            "reached": no,
+            "entered": no,
+            "collided": no,
+            "success": no,
+            "success_step": jnp.full((), -1, jnp.int32),
+            "d_est": zero,
+            "offset_est": zero,
+            "distance": self._distance(phys, scene),
+        }
+        return State(
+            pipeline_state=phys,
+            obs=self._obs(phys),
+            reward=zero,
+            done=zero,
+            metrics=self._metrics(phys, scene, info),
+            info=info,
+        )
+
+    def step(self, state: State, action: jax.Array, slot_end: bool | None = None) -> State:
+        """One control step (see the module docstring).
+
+        ``slot_end``: ``None`` (Brax's call) ends the detector's slot when it
+        is due, decided per step; ``True`` / ``False`` (static) says whether
+        this step ends a slot, for loops that know it (`rollout`).
+        """
+        action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
+        info = dict(state.info)
+        params, scene = info["params"], info["scene"]
+        phys = state.pipeline_state
+        ctrl = joint_targets(self.gait, phys.time, action[0] * params.max_steer, 0.0, self.compensate)
+        phys = self.physics.step(phys, ctrl)
+        frame = self._frame(phys, scene)
+        events, overflow = dvs.frame_difference(
+            info["frame"], frame, phys.time, threshold=params.event_threshold, capacity=self.event_capacity
+        )
+        angle, velocity = phys.qpos[self._joints[0]], phys.qvel[self._dofs[0]]
+        tr, tp = self.tracker, self.tracker_params
+        tstate = stream.step(tr, tp, info["tracker"], events, phys.time, angle, velocity)
+        if slot_end is None:
+            ended = stream.due(tp, tstate)
+            tstate, out = jax.lax.cond(
+                ended,
+                lambda s: stream.slot_end(tr, tp, s, phys.time),
+                lambda s: (s, stream._nothing(tr, s, phys.time)),
+                tstate,
+            )
+        elif slot_end:
+            tstate, out = stream.slot_end(tr, tp, tstate, phys.time)
+            ended = jnp.ones((), bool)
+        else:
+            out, ended = stream._nothing(tr, tstate, phys.time), jnp.zeros((), bool)
+        slot = jax.tree.map(lambda new, old: jnp.where(ended, new, old), out, info["slot"])
+        slot = slot._replace(control=out.control)
+        est = _steering_estimate(tr, out)
+        n = info["control_steps"] + 1
+        reached = pipes.reached(phys.head_pos, scene)[0]
+        entered = pipes.entered(phys.head_pos, phys.head_mat, scene)[0]
+        collided = pipes.collided(phys.qpos, scene)[0]
+        lying = scene.kind[0] == pipes.LYING
+        success_now = jnp.where(lying, entered, reached)
+        success = info["success"] | success_now
+        distance = self._distance(phys, scene)
+        info.update(
+            frame=frame,
+            events=events,
+            overflow=overflow,
+            tracker=tstate,
+            slot=slot,
+            ended=ended,
+            com_ring=info["com_ring"].at[info["control_steps"] % (2 * self.window)].set(phys.com_pos[:2]),
+            control_steps=n,
+            reached=info["reached"] | reached,
+            entered=info["entered"] | entered,
+            collided=info["collided"] | collided,
+            success=success,
+            success_step=jnp.where(success_now & ~info["success"], n, info["success_step"]),
+            d_est=jnp.where(ended & est.valid, est.distance, info["d_est"]),
+            offset_est=jnp.where(ended & est.valid, est.offset, info["offset_est"]),
+            distance=distance,
+        )
+        done = success | (collided & ~lying) | (n >= self.max_steps)
+        reward = (state.info["distance"] - distance) + success_now.astype(jnp.float32)
+        return state.replace(
+            pipeline_state=phys,
+            obs=self._obs(phys),
+            reward=reward,
+            done=done.astype(jnp.float32),
+            metrics=self._metrics(phys, scene, info),
+            info=info,
+        )
+
+    # ------------------------------------------------------------ parts
+
+    def _frame(self, phys, scene):
+        return cam.frame(phys, cam.pipe_scene(pipes.render_pipes(scene)))
+
+    def _distance(self, phys, scene):
+        entry = pipes._axis_frame(scene)[0][0]
+        point = jnp.where(scene.kind[0] == pipes.LYING, entry[:2], scene.xy[0])
+        return jnp.linalg.norm(point - phys.head_pos[:2])
+
+    def _obs(self, phys):
+        return jnp.concatenate([phys.qpos[self._joints], phys.qvel[self._dofs]])
+
+    def central_line(self, info):
+        """The central line: the centre of mass averaged over the last gait period, and its heading.
+
+        The heading is the direction from the centre of mass averaged over the
+        period before the last to that averaged over the last one (whole
+        periods, so the swing averages out; it lags a turn by a period).
+        Before two periods have passed, the start's heading.
+        """
+        ring = info["com_ring"]
+        n = self.window
+        order = (info["control_steps"] + jnp.arange(2 * n)) % (2 * n)  # oldest first once the ring is full
+        path = ring[order]
+        older, newer = jnp.mean(path[:n], axis=0), jnp.mean(path[n:], axis=0)
+        heading = jnp.arctan2(newer[1] - older[1], newer[0] - older[0])
+        heading = jnp.where(info["control_steps"] >= 2 * n, heading, info["scene"].start[2])
+        return newer, heading
+
+    def _metrics(self, phys, scene, info):
+        truth = pipes.truth(phys.head_pos, phys.head_mat, scene, cam.HEAD_CAMERA)
+        point, heading = self.central_line(info)
+        slot = info["slot"]
+        f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+        return {
+            "depth": truth.depth[0],
+            "lateral": truth.lateral[0],
+            "offset_true": pipes.line_offset(scene, point, heading)[0],
+            "d_est": info["d_est"],
+            "offset_est": info["offset_est"],
+            "control": f32(slot.control),
+            "detected": f32(info["ended"] & (slot.body.valid | slot.entry.valid)),
+            "in_view": f32(truth.in_view[0]),
+            "distance": info["distance"],
+            "events": f32(info["events"].count()),
+            "overflow": f32(info["overflow"]),
+            "reached": f32(info["reached"]),
+            "entered": f32(info["entered"]),
+            "collided": f32(info["collided"]),
+            "success": f32(info["success"]),
+        }
+
+
+def _steering_estimate(tracker: stream.Tracker, out: stream.SlotOutput):
+    """Alg. 3's estimate of the detection that steers (the tracker's ``target``)."""
+    if tracker.target == "body":
+        return out.body_estimate
+    if tracker.target == "entry":
+        return out.entry_estimate
+    return jax.tree.map(lambda e, b: jnp.where(out.entry.valid, e, b), out.entry_estimate, out.body_estimate)
+
+
+def rollout(env: PipeEnv, controller, controller_params, key: jax.Array, slots: int, scene=None, params=None):
+    """``slots`` detector slots of ``env`` driven by ``controller``: a scan of slots, each a scan of steps.
+
+    ``controller`` is an ``(init, act)`` pair (`robots.snake.pipe_controller`):
+    ``init()`` gives its state, ``act(params, cstate, state) -> (cstate,
+    action)`` is called before every step. Pure; jit and vmap it over keys
+    (and scenes). Returns the per-step record (metrics, done, the
+    controller's mode and action, the head's floor position), leaves ``(slots * K, ...)``,
+    and the final `brax.envs.base.State`. The episode runs on after ``done``
+    (the record says when); the outcomes in ``metrics`` are latched.
+    """
+    init, act = controller
+    k = env.slot_steps
+    state = env.reset(key, scene, params)
+
+    def one(carry, end):
+        s, c = carry
+        c, action = act(controller_params, c, s)
+        s = env.step(s, action, slot_end=end)
+        rec = {
+            "metrics": s.metrics,
+            "done": s.done,
+            "mode": c.mode,
+            "action": action[0],
+            "head": s.pipeline_state.head_pos[:2],
+        }
+        return (s, c), rec
+
+    def slot(carry, _):
+        carry, inner = jax.lax.scan(lambda c, _: one(c, False), carry, None, length=k - 1)
+        carry, last = one(carry, True)
+        rec = jax.tree.map(lambda a, b: jnp.concatenate([a, b[None]]), inner, last)
+        return carry, rec
+
+    (final, _), record = jax.lax.scan(slot, (state, init()), None, length=slots)
+    record = jax.tree.map(lambda a: a.reshape((slots * k,) + a.shape[2:]), record)
+    return record, final
