@@ -15,7 +15,8 @@ step:
 3. the frame-difference DVS (`spikejax.vision.dvs.frame_difference`, the
    paper's simulator mode) makes the step's events;
 4. the streaming detector (`spikejax.vision.stream`) runs the grids' Alg. 1
-   update on them with the head joint's encoder (Eq. 4-6), and every
+   update of the snake pipe-tracking paper on them with the head joint's
+   encoder (its Eq. 4-6), and every
    ``slot_steps`` steps Alg. 2 (body / entry) and Alg. 3 (distance by Eq. 8
    with the known size, offsets, ``C = sign(offset)``);
 5. truth (`robots.snake.pipes.truth`, ``line_offset`` from the central line,
@@ -23,7 +24,7 @@ step:
 
 A slot ends at the same control step for every member of a batch (all
 episodes start at time 0), so `rollout` scans slots, each a scan of its
-steps, and runs Alg. 2 once per slot (``step(..., slot_end=True)``);
+steps, and runs the pipe-tracking paper's Alg. 2 once per slot (``step(..., slot_end=True)``);
 the Brax ``step`` (``slot_end=None``) decides per step with a ``cond``,
 which under ``vmap`` pays for Alg. 2 every step.
 
@@ -35,13 +36,14 @@ Spaces and records:
   encoders); nothing of the world. The controllers read the detector's
   output from ``info``.
 * ``info["slot"]``: the last `spikejax.vision.stream.SlotOutput` (the
-  detections, Alg. 3's estimates and ``control``, the C in force);
+  detections, the snake pipe-tracking paper's Alg. 3 estimates and ``control``, the C in force);
   ``info["ended"]`` whether this step ended a slot; ``info["tracker"]`` the
   detector's state; ``info["events"]`` / ``info["overflow"]`` the step's
   events and those that did not fit; ``info["scene"]`` the episode's
   `robots.snake.pipes.PipeScene`.
 * ``metrics``: truth and estimate side by side for the target pipe (slot 0
-  of the scene): ``depth`` (along the optical axis, what Eq. 8 estimates),
+  of the scene): ``depth`` (along the optical axis, what Eq. 8 of the snake
+  pipe-tracking paper estimates),
   ``offset_true`` (from the central line: the centre of mass averaged over
   the last gait period, along its mean heading), ``lateral`` (across the
   optical axis), ``d_est`` and ``offset_est`` (the steering detection's, at
@@ -117,8 +119,9 @@ class PipeEnv(Env):
         tracker: the streaming detector's static configuration
             (default `default_tracker`: the line grid, sync).
         tracker_params: its traced parameters (default
-            `spikejax.vision.stream.tracker_params` with Alg. 3's known size
-            of the target kind and this snake's camera-offset fit `SWING`).
+            `spikejax.vision.stream.tracker_params` with the known size of
+            the target kind for Alg. 3 of the snake pipe-tracking paper, and
+            this snake's camera-offset fit `SWING`).
         max_steps: control steps before the episode times out.
         max_steer: ``C_o`` at full action, rad; 0.1 reached the most pipes of
             0.05, 0.1 and 0.15 on standing pipes 25-28 degrees aside
@@ -385,7 +388,7 @@ class PipeEnv(Env):
 
 
 def _steering_estimate(tracker: stream.Tracker, out: stream.SlotOutput):
-    """Alg. 3's estimate of the detection that steers (the tracker's ``target``)."""
+    """The estimate (Alg. 3 of the snake pipe-tracking paper) of the detection that steers (the tracker's ``target``)."""
     if tracker.target == "body":
         return out.body_estimate
     if tracker.target == "entry":
