@@ -9,6 +9,7 @@ from robots.snake import reproduce
 from spikejax import cli
 
 
+@pytest.mark.slow  # ~25 s on 2 cores; its tables' arithmetic stays in the fast suite below
 def test_reproduce_snake_gait_writes_its_tables_and_figures(tmp_path, monkeypatch):
     monkeypatch.setenv("SPIKEJAX_SNAKE_SCALE", "0.05")
     assert cli.main(["reproduce", "snake-gait", "--out", str(tmp_path), "--no-progress"]) == 0
