@@ -64,18 +64,19 @@ def g1_step_tracks(draws: list[tuple], *, nthread: int | None = None) -> np.ndar
     n_steps = (N_FRAMES - 1) * steps_per_frame
     t = jnp.arange(n_steps, dtype=jnp.float32) * dt
     controls = np.asarray(servo_targets(p, jnp.asarray(required_spikes(0, PERIOD)), t))
-    w = physics.walk(models, controls, nthread=nthread)
+    initial = np.stack([physics.standing_state(m) for m in models])
+    w = physics.walk(models, controls, nthread=nthread, initial=initial)
     # Walk sample k is the state after step k + 1, at time (k + 1) dt: frame j > 0 is sample j * spf - 1.
     idx = np.arange(1, N_FRAMES) * steps_per_frame - 1
     moving = np.stack([w.xy[:, idx, 0], w.xy[:, idx, 1], w.height[:, idx], w.roll[:, idx], w.pitch[:, idx]], -1)
     moving = np.concatenate([moving, w.yaw[:, idx, None]], axis=-1)
-    standing = np.stack([_standing_torso(m) for m in models])[:, None]
+    standing = np.stack([_standing_torso(m, state) for m, state in zip(models, initial)])[:, None]
     return np.concatenate([standing, moving], axis=1).astype(np.float32)
 
 
-def _standing_torso(model) -> np.ndarray:
-    qpos = physics.standing_state(model)[1 : 1 + model.nq]
-    w = physics._walk_of(np.zeros(1), qpos[None])
+def _standing_torso(model, state) -> np.ndarray:
+    qpos = state[1 : 1 + model.nq]
+    w = physics.torso_walk(np.zeros(1), qpos[None])
     return np.array([w.xy[0, 0], w.xy[0, 1], w.height[0], w.roll[0], w.pitch[0], w.yaw[0]])
 
 

@@ -28,7 +28,7 @@ from mujoco import rollout as mj_rollout
 
 from spikejax.errors import UserError
 
-__all__ = ["MODEL_PATH", "load_model", "randomised", "standing_state", "Walk", "walk", "mjx_walk"]
+__all__ = ["MODEL_PATH", "load_model", "randomised", "standing_state", "Walk", "walk", "torso_walk", "mjx_walk"]
 
 MODEL_PATH = Path(__file__).with_name("hexapod.xml")
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -86,28 +86,33 @@ class Walk(NamedTuple):
     height: np.ndarray
 
 
-def walk(models: list[mujoco.MjModel], controls: np.ndarray, nthread: int | None = None) -> Walk:
+def walk(
+    models: list[mujoco.MjModel], controls: np.ndarray, nthread: int | None = None, initial: np.ndarray | None = None
+) -> Walk:
     """Step each model from standing through its servo targets.
 
     Args:
         models: one per walk (the same object may repeat); equal size signatures.
         controls: servo targets per physics step, ``(n_steps, 12)`` for all or ``(batch, n_steps, 12)``.
         nthread: C threads (default: the cores).
+        initial: the models' `standing_state` ``(batch, nstate)``, if the caller has them already.
     """
     controls = np.asarray(controls, np.float64)
     if controls.ndim == 2:
         controls = np.broadcast_to(controls, (len(models), *controls.shape))
     if controls.shape[0] != len(models) or controls.shape[-1] != models[0].nu:
         raise UserError(f"controls must be (n_steps, {models[0].nu}) or ({len(models)}, n_steps, {models[0].nu})")
-    initial = np.stack([standing_state(m) for m in models])
+    if initial is None:
+        initial = np.stack([standing_state(m) for m in models])
     nthread = nthread or os.cpu_count() or 1
     datas = [mujoco.MjData(models[0]) for _ in range(nthread)]
     states, _ = mj_rollout.rollout(list(models), datas, initial, np.ascontiguousarray(controls))
     t = (np.arange(controls.shape[1]) + 1) * models[0].opt.timestep
-    return _walk_of(t, states[..., 1 : 1 + models[0].nq])
+    return torso_walk(t, states[..., 1 : 1 + models[0].nq])
 
 
-def _walk_of(t, qpos) -> Walk:
+def torso_walk(t, qpos) -> Walk:
+    """The `Walk` of torso positions ``qpos[..., :7]`` (free joint) sampled at times ``t``."""
     w, x, y, z = (qpos[..., 3 + i] for i in range(4))
     yaw = np.unwrap(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), axis=-1)
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
@@ -136,4 +141,4 @@ def mjx_walk(model: mujoco.MjModel, controls) -> Walk:
         return jax.lax.scan(step, dx, u)[1]
 
     qpos = np.asarray(jax.jit(jax.vmap(one))(controls), np.float64)
-    return _walk_of((np.arange(controls.shape[1]) + 1) * model.opt.timestep, qpos)
+    return torso_walk((np.arange(controls.shape[1]) + 1) * model.opt.timestep, qpos)

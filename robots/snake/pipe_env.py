@@ -238,7 +238,7 @@ class PipeEnv(Env):
             "events": events,
             "overflow": jnp.zeros((), jnp.int32),
             "tracker": tracker_state,
-            "slot": stream._nothing(self.tracker, tracker_state, phys.time),
+            "slot": stream.no_slot(self.tracker, tracker_state, phys.time),
             "ended": no,
             "com_ring": com,
             "control_steps": jnp.zeros((), jnp.int32),
@@ -285,14 +285,14 @@ class PipeEnv(Env):
             tstate, out = jax.lax.cond(
                 ended,
                 lambda s: stream.slot_end(tr, tp, s, phys.time),
-                lambda s: (s, stream._nothing(tr, s, phys.time)),
+                lambda s: (s, stream.no_slot(tr, s, phys.time)),
                 tstate,
             )
         elif slot_end:
             tstate, out = stream.slot_end(tr, tp, tstate, phys.time)
             ended = jnp.ones((), bool)
         else:
-            out, ended = stream._nothing(tr, tstate, phys.time), jnp.zeros((), bool)
+            out, ended = stream.no_slot(tr, tstate, phys.time), jnp.zeros((), bool)
         slot = jax.tree.map(lambda new, old: jnp.where(ended, new, old), out, info["slot"])
         slot = slot._replace(control=out.control)
         est = _steering_estimate(tr, out)

@@ -77,6 +77,7 @@ __all__ = [
     "step",
     "tracker_params",
     "update",
+    "no_slot",
 ]
 
 TARGETS = ("any", "body", "entry")
@@ -356,7 +357,7 @@ def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) ->
     return new, SlotOutput(body, entry, body_est, entry_est, control, angle, velocity)
 
 
-def _nothing(tracker: Tracker, state: TrackerState, t) -> SlotOutput:
+def no_slot(tracker: Tracker, state: TrackerState, t) -> SlotOutput:
     """The `SlotOutput` of a step that ends no slot: no detections, the control in force."""
     z = jnp.zeros((), jnp.float32)
     no = jnp.zeros((), bool)
@@ -379,7 +380,7 @@ def update(
     state, out = jax.lax.cond(
         ended,
         lambda s: slot_end(tracker, params, s, t),
-        lambda s: (s, _nothing(tracker, s, t)),
+        lambda s: (s, no_slot(tracker, s, t)),
         state,
     )
     return state, out, ended
