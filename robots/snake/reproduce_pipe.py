@@ -71,6 +71,7 @@ HEADER = [
     *(f"fail_{label}" for label in LABELS),
 ]
 CHUNK = 64  # episodes per compiled batch
+CIRCLE_CHUNK = 16  # with the circle grid: its (32, 128, 128) state and spectra per episode outgrow the cache
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
 
@@ -249,14 +250,20 @@ def _conditions(name, env, scenes, keys, slots, machine, baselines: int, progres
             continue
         sub = jax.tree.map(lambda a: a[:n], scenes)
         params = _switch_params(machine, controller, n)
-        size = min(CHUNK, keys.shape[0])
+        size = min(CIRCLE_CHUNK if env.tracker.detector.circle is not None else CHUNK, keys.shape[0])
         res = _episodes(env, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size)
         out.append((controller, res, sub))
     return out
 
 
 def run(
-    out: Path, episodes: int, seconds: float, scene_file=None, progress: bool = True, baselines: int = 64
+    out: Path,
+    episodes: int,
+    seconds: float,
+    scene_file=None,
+    progress: bool = True,
+    baselines: int = 64,
+    situations: list[str] | None = None,
 ) -> list[list]:
     """Everything in the module docstring."""
     from robots.snake import pipe_controller as pc
@@ -290,7 +297,12 @@ def run(
     else:
         # One env per kind of pipe (its grids and known size): left and right share its programs.
         first = {}
-        for name, (kind, _) in pipes.SITUATIONS.items():
+        chosen = list(pipes.SITUATIONS) if situations is None else situations
+        unknown = [name for name in chosen if name not in pipes.SITUATIONS]
+        if unknown or not chosen:
+            raise UserError(f"--situations takes names among {', '.join(pipes.SITUATIONS)}, not {unknown or chosen}")
+        for name in chosen:
+            kind = pipes.SITUATIONS[name][0]
             first.setdefault(kind, name)
             jobs.append((name, kind == pipes.LYING, dict(situation=first[kind]), None))
     envs = {}
@@ -320,6 +332,13 @@ def _add_arguments(parser) -> None:
     parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per episode (default 60)")
     parser.add_argument("--scene", default=None, help="a scene file (TOML) used by every episode")
     parser.add_argument(
+        "--situations",
+        type=lambda text: [name.strip() for name in text.split(",") if name.strip()],
+        default=None,
+        help="comma-separated situations to run (default all: standing-left, standing-right, lying-left, "
+        "lying-right); ignored with --scene",
+    )
+    parser.add_argument(
         "--baselines",
         type=int,
         default=64,
@@ -335,11 +354,12 @@ def reproduce_command_run(
     seconds: float = 60.0,
     scene=None,
     baselines: int = 64,
+    situations: list[str] | None = None,
     no_progress: bool = False,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     with output_directory(out, command="reproduce snake-pipe") as out:
-        rows = run(out, episodes, seconds, scene, progress=not no_progress, baselines=baselines)
+        rows = run(out, episodes, seconds, scene, progress=not no_progress, baselines=baselines, situations=situations)
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
         print(f"wrote {out}/snake_pipe.csv, snake_pipe_trajectories.png")
