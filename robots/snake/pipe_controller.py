@@ -57,6 +57,7 @@ __all__ = [
     "SEARCH",
     "ControllerParams",
     "ControllerState",
+    "machine_params",
     "SwitchParams",
     "bang_bang",
     "privileged",
@@ -83,6 +84,18 @@ class ControllerParams(NamedTuple):
     final_distance: float | jax.Array = 0.6
     speed: float | jax.Array = SNAKE_SPEED
     margin: float | jax.Array = 2.0
+
+
+def machine_params(lying: bool) -> ControllerParams:
+    """The state machine's parameters for a target kind: the blind ``FINAL`` stretch for a lying pipe only.
+
+    A lying pipe's entry ring leaves the top of the image below about 0.6 m
+    (SPEC.md section 5), so the last stretch is driven blind; a standing
+    pipe, tall and ever wider, stays in view to the end, so the bang-bang
+    law steers all the way (``final_distance = 0``): going blind below 0.6 m
+    passed 15 of 64 standing pipes (docs/BENCHMARKS.md, "Snake pipe loop").
+    """
+    return ControllerParams(final_distance=0.6 if lying else 0.0)
 
 
 class ControllerState(NamedTuple):

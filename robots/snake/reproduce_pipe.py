@@ -181,7 +181,7 @@ def summarize(name, controller, res, lying: bool, dt: float, slot_steps: int, lo
     sign_ok = (np.sign(res["offset_est"]) == np.sign(res["offset_true"]))[strong]
     steer = (res["action"] != 0) & live
     agree = np.where(steer, np.sign(res["action"]) == np.sign(res["offset_true"]), False).sum(1)
-    sign_right = agree / np.maximum(steer.sum(1), 1)
+    sign_right = np.where(steer.any(1), agree / np.maximum(steer.sum(1), 1), 1.0)  # never steered: not "wrong side"
     last = np.array([np.flatnonzero(d[:e])[-1] if d[:e].any() else -1 for d, e in zip(det, end)])
     last_seen_slots = np.where(last >= 0, (end - 1 - last) // slot_steps, 10**9)
     depth_end = res["depth"][np.arange(n), end - 1]
@@ -275,7 +275,6 @@ def run(
         raise UserError(f"--seconds must be positive, got {seconds}")
     if baselines < 0:
         raise UserError(f"--baselines must be >= 0, got {baselines}")
-    machine = pc.ControllerParams()
     rows, results = [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
@@ -317,6 +316,7 @@ def run(
         slots = steps_for(env)
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
+        machine = pc.machine_params(lying)
         for controller, res, sub in _conditions(name, env, scenes, keys, slots, machine, baselines, progress):
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, int(machine.lost_slots)))
             if controller == "bang-bang":
