@@ -256,6 +256,12 @@ def run(
             f"max {int(res['overflow'].max())}; crossings beyond {decisions.MAX_PER_PIXEL} a pixel and frame: "
             f"median {int(np.median(res['clipped']))} a step"
         )
+        if full is not None:
+            print(
+                f"at 800 x 1280: events a step median {int(np.median(full['events']))}; beyond the capacity "
+                f"({decisions.capacity(PAPER_SENSOR)} a frame): max {int(full['overflow'].max())}; crossings beyond "
+                f"{decisions.MAX_PER_PIXEL} a pixel and frame: median {int(np.median(full['clipped']))} a step"
+            )
         print(
             f"d_near = {cam.D_NEAR:.3f} m from the camera (height {cam.camera_height():.3f} m, tilt {cam.TILT_DEG:g} deg); "
             f"prey cubes of {prey_size:g} m"
