@@ -16,9 +16,10 @@ at the paper's 800 x 1280 sensor with its 100-pixel windows and own weights
   nearest, by the truth's gait, and over the scenes with one near prey and at
   least one far one (ACCEPTANCE A6's "nearest" mechanism); the empty arenas
   (``empty``: G1 or no gait spike); the full-resolution check (``full_check``:
-  agreement, and each sensor's accuracy on those scenes); for both readouts: ``frame`` (`edges.sync_step`'s, at most one gait spike a
-  frame) and ``ordered`` (the frame's layer-3 spikes reaching the gait neurons
-  one by one, `decisions.ordered_readout`);
+  agreement, and each sensor's accuracy on those scenes); for both readouts:
+  ``frame`` (`edges.sync_step`'s, at most one gait spike a frame) and
+  ``ordered`` (the frame's layer-3 spikes reaching the gait neurons one by one,
+  `decisions.ordered_readout`);
 - ``hexapod_confusion.csv``: the confusion matrices (truth by decision), both readouts;
 - ``hexapod_decisions.png``: the Fig. 7 counterpart for a near and a far scene:
   the step's DVS events, the filter's spikes, the layer-3 windows' spikes (the
@@ -183,7 +184,7 @@ def run(
     prey_size: float = prey_mod.PREY_SIZE,
     no_progress: bool = False,
 ) -> int:
-    """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--empty M] [--full-check K] [--seed S]``.
+    """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--empty M] [--full-check K] [--prey-size S] [--seed S]``.
 
     Args:
         out: output directory.
@@ -200,7 +201,7 @@ def run(
         draws = physics.randomised(scenes_n + empty_n, seed=seed)
         index = np.arange(scenes_n + empty_n)
         n_prey = np.where(index < scenes_n, 1 + index % prey_mod.MAX_PREY, 0)
-        total = scenes_n + empty_n + full_check
+        total = scenes_n + empty_n + min(full_check, scenes_n)
         with tqdm(total=total, desc="hexapod decisions", unit="scene", disable=no_progress) as bar:
             res = _decide_all(draws, index, n_prey, seed, prey_size, cam.EDGE_CONFIG, _CHUNK, bar)
             full = None
