@@ -87,6 +87,19 @@ def test_too_many_crossings_are_counted():
     assert int(events.count()[0]) == 50 and int(overflow[0]) == 20 * 2 + 30
 
 
+def test_crossings_split_the_overflow_into_clipped_and_beyond_capacity():
+    params = dvs.dvs_params(pos_threshold=0.2, neg_threshold=0.2)
+    frames = _frames(0.2, 0.8)
+    # log(0.801 / 0.201) / 0.2 = 6.9: six crossings a pixel, as the test above counts.
+    n = dvs.crossings(params, dvs.init(params, frames[0], key=jax.random.key(0)), frames[1])
+    assert n.shape == (4, 5) and (np.asarray(n) == 6).all()
+    events, overflow = dvs.emulate(
+        params, frames, jnp.asarray([0.0, 0.1]), capacity=50, max_per_pixel=4, key=jax.random.key(0)
+    )
+    clipped = int(jnp.maximum(n - 4, 0).sum())
+    assert clipped == 40 and int(overflow[0]) - clipped == 80 - int(events.count()[0]) == 30
+
+
 def test_mismatch_and_noise_come_from_the_key():
     params = dvs.dvs_params(threshold_sigma=0.2, noise_rate=5.0)
     frames = jnp.stack([jnp.full((32, 32), v) for v in (0.3, 0.5, 0.5)])

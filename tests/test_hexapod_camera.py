@@ -9,7 +9,7 @@ import pytest
 
 from robots.hexapod import camera as cam
 from robots.hexapod import decisions, physics, prey
-from robots.hexapod.vision import FORWARD, LEFT, RIGHT
+from robots.hexapod.vision import FORWARD, LEFT, PAPER_SENSOR, RIGHT
 from spikejax.vision import render
 
 
@@ -40,21 +40,22 @@ def _scene(*prey_xy_alive):
     alive = np.zeros(prey.MAX_PREY, bool)
     for i, (x, y, a) in enumerate(prey_xy_alive):
         xy[i], alive[i] = (x, y), a
-    return prey.PreyScene(jnp.zeros(3), jnp.asarray(xy), jnp.full((prey.MAX_PREY,), 0.1), jnp.asarray(alive))
+    size = jnp.full((prey.MAX_PREY,), prey.PREY_SIZE)
+    return prey.PreyScene(jnp.zeros(3), jnp.asarray(xy), size, jnp.asarray(alive))
 
 
 def test_a_prey_at_d_near_puts_its_base_on_the_near_far_boundary_row():
     torso = jnp.array([0.0, 0.0, cam.camera_height() - 0.04, 0.0, 0.0, 0.0])
     cam_x = float(cam.pose(torso)[0][0])
     # The front face D_NEAR ahead of the camera: its bottom edge at row 100 of 160 (5/8 from the top).
-    world = cam.prey_scene(_scene((cam_x + cam.D_NEAR + 0.05, 0.0, True)))
+    world = cam.prey_scene(_scene((cam_x + cam.D_NEAR + prey.PREY_SIZE / 2, 0.0, True)))
     frame = jax.jit(cam.frame)
     img = np.asarray(frame(torso, world))
     column = img[:, 128]
     dark = np.nonzero(column < 0.3)[0]
     assert dark.max() + 1 == pytest.approx(100, abs=1)
     # A dead slot is not drawn: the frame is the bare floor.
-    hidden = np.asarray(frame(torso, cam.prey_scene(_scene((cam_x + cam.D_NEAR + 0.05, 0.0, False)))))
+    hidden = np.asarray(frame(torso, cam.prey_scene(_scene((cam_x + cam.D_NEAR + prey.PREY_SIZE / 2, 0.0, False)))))
     np.testing.assert_allclose(hidden, cam.FLOOR_BRIGHTNESS, atol=1e-6)
     assert isinstance(world.boxes, render.Boxes)
 
@@ -72,6 +73,7 @@ def fixed_decisions():
         _scene(at(1.5, 0.0)),  # far, ahead
         _scene(at(0.34, 26.0), at(2.0, -5.0)),  # near on the left, a far one beside
         _scene(at(0.30, -10.0)),  # near on the right
+        _scene(),  # an empty arena: keep walking
     ]
     batch = jax.tree.map(lambda *a: jnp.stack(a), *scenes)
     key = jax.random.key(3)
@@ -83,15 +85,18 @@ def fixed_decisions():
 def test_fixed_scenes_get_the_truths_gait(fixed_decisions):
     # Scenes where the wiring wins; over random near scenes it does far less often (docs/BENCHMARKS.md).
     d, _ = fixed_decisions
-    np.testing.assert_array_equal(d.truth, [FORWARD, LEFT, RIGHT])
-    np.testing.assert_array_equal(d.gait, [FORWARD, LEFT, RIGHT])
+    np.testing.assert_array_equal(d.truth, [FORWARD, LEFT, RIGHT, FORWARD])
+    np.testing.assert_array_equal(d.gait, [FORWARD, LEFT, RIGHT, FORWARD])
     out = np.asarray(d.out_counts)
+    assert out[3].sum() == 0  # the empty arena's shot noise never reaches the gait neurons
     assert out[0, 0] > 0 and out[0, 1:].sum() == 0  # a far prey fires G1 alone
     assert out[1, LEFT] > out[1, FORWARD] and out[1, RIGHT] == 0  # the turn away from the prey stays silent
     assert out[2, RIGHT] > out[2, FORWARD] and out[2, LEFT] == 0
-    assert int(d.events.min()) > 0 and int(d.filter_spikes.min()) > 0
+    assert int(d.events[:3].min()) > 0 and int(d.filter_spikes[:3].min()) > 0
     # The filter drops most events (the shot noise), layer 2 most filter spikes.
-    assert np.all(d.filter_spikes < d.events) and np.all(d.layer2_spikes < d.filter_spikes)
+    assert np.all(d.filter_spikes < d.events) and np.all(d.layer2_spikes[:3] < d.filter_spikes[:3])
+    # Nothing is lost to the capacity; the crossings beyond MAX_PER_PIXEL are counted apart (none without prey).
+    assert int(d.overflow.max()) == 0 and int(d.clipped[1]) > 0 and int(d.clipped[3]) == 0
 
 
 def test_vmap_over_scenes_equals_single_runs(fixed_decisions):
@@ -99,6 +104,13 @@ def test_vmap_over_scenes_equals_single_runs(fixed_decisions):
     for i, s in enumerate(singles):
         for a, b in zip(jax.tree.leaves(s), jax.tree.leaves(batched)):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[i])
+
+
+def test_capacity_scales_with_the_pixels():
+    assert decisions.capacity(cam.EDGE_CONFIG) == decisions.CAPACITY
+    assert decisions.capacity(PAPER_SENSOR) == 25 * decisions.CAPACITY
+    assert cam.sensor_camera(PAPER_SENSOR) == render.Camera(width=1280, height=800, fov=cam.CAMERA.fov)
+    assert cam.sensor_camera(cam.EDGE_CONFIG) == cam.CAMERA
 
 
 def test_ordered_readout_is_eq1_2_input_by_input():
@@ -122,3 +134,21 @@ def test_ordered_readout_is_eq1_2_input_by_input():
     fires, v = decisions.ordered_readout(jnp.asarray(v0, jnp.float32), jnp.asarray(n), jnp.asarray(w, jnp.float32))
     np.testing.assert_array_equal(fires, [e[0] for e in expected])
     np.testing.assert_allclose(v, [e[1] for e in expected], atol=1e-5)
+
+
+@pytest.mark.slow
+def test_the_paper_sensor_decides_as_the_scaled_one_on_fixed_scenes():
+    # ACCEPTANCE A11 on two scenes: 800 x 1280 pixels, 100-px windows and the paper's own weights (0.06, 0.3)
+    # against 160 x 256 and 20-px windows; the reproduction's --full-check measures the agreement rate.
+    track = jnp.asarray(decisions.g1_step_tracks([(0.8, 1.0, 1.0)])[0])
+    cam_x = float(cam.ground_pose(track[0])[0])
+    b = math.radians(-10.0)
+    scenes = [_scene((cam_x + 1.5, 0.0, True)), _scene((cam_x + 0.3 * math.cos(b), 0.3 * math.sin(b), True))]
+    batch = jax.tree.map(lambda *a: jnp.stack(a), *scenes)
+    key = jax.random.key(3)
+    run = lambda config: jax.jit(jax.vmap(lambda s: decisions.decide(track, s, key, config=config)))(batch)
+    full, scaled = run(PAPER_SENSOR), run(cam.EDGE_CONFIG)
+    np.testing.assert_array_equal(full.truth, [FORWARD, RIGHT])
+    np.testing.assert_array_equal(full.gait, scaled.gait)
+    np.testing.assert_array_equal(full.gait, full.truth)
+    assert int(full.overflow.max()) == 0

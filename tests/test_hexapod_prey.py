@@ -1,5 +1,6 @@
 """The predator-prey task's scenes and truth (`robots.hexapod.prey`)."""
 
+import argparse
 import math
 
 import jax
@@ -8,6 +9,7 @@ import numpy as np
 import pytest
 
 from robots.hexapod import prey
+from robots.hexapod import reproduce_decisions as rd
 from robots.hexapod.vision import FORWARD, LEFT, RIGHT
 from spikejax.errors import UserError
 
@@ -107,3 +109,20 @@ def test_the_truth_rule_and_capture():
     assert int(prey.truth_gait(gone, pose, 1.0)) == FORWARD and int(prey.truth_gait(gone, pose, 2.5)) == LEFT
     none = s._replace(alive=jnp.zeros(4, bool))
     assert int(prey.nearest(none, pose)[0]) == -1 and int(prey.truth_gait(none, pose, 1.0)) == FORWARD
+
+
+def test_the_reproduction_draws_empty_arenas_and_takes_the_prey_size():
+    both = jax.jit(lambda i: (rd.scenes(0, i), rd.scenes(0, i, 0, 0.1)))
+    default, empty = both(jnp.int32(5))
+    assert np.asarray(default.alive).sum() == 2  # 1 + 5 % 4 prey by default
+    np.testing.assert_allclose(np.asarray(default.size), prey.PREY_SIZE)
+    assert not np.asarray(empty.alive).any()  # an empty arena: the truth keeps walking
+    np.testing.assert_allclose(np.asarray(empty.size), 0.1)
+    assert int(jax.jit(prey.truth_gait)(empty, jnp.zeros(3), 10.0)) == FORWARD
+    parser = argparse.ArgumentParser()
+    rd.command.add_arguments(parser)
+    args = parser.parse_args(["--out", "x", "--empty", "0", "--full-check", "64", "--prey-size", "0.1"])
+    assert (args.empty_n, args.full_check, args.prey_size, args.scenes_n) == (0, 64, 0.1, 2000)
+    for bad in (["--empty", "-1"], ["--full-check", "x"], ["--prey-size", "0"], ["--prey-size", "2"]):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["--out", "x", *bad])

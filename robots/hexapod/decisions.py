@@ -6,7 +6,11 @@ engine (`physics.walk`, each scene its own randomised robot). The head camera
 (`robots.hexapod.camera`) renders a frame every `FRAME_S` = 20 ms (SPEC 4.3:
 at least 10 frames a CPG step), 17 frames from the standing one. The
 contrast-threshold DVS emulator (`spikejax.vision.dvs.step`, thresholds 0.2
-with 3 % mismatch, 0.5 Hz shot noise a pixel) turns each interval into events;
+with 3 % mismatch, 0.5 Hz shot noise a pixel, at most `MAX_PER_PIXEL` events
+a pixel and interval, `capacity` events an interval) turns each interval into
+events; the crossings beyond `MAX_PER_PIXEL` (``clipped``) are counted apart
+from the events beyond the capacity (``overflow``; docs/BENCHMARKS.md gives
+both and what raising the cap changes);
 each frame's events, as a per-pixel count image, drive the visual SNN once at
 the frame's time (`spikejax.vision.edges.sync_step`, the paper's weights scaled
 to 20-pixel windows by `robots.hexapod.vision.vision_params`). The decision is
@@ -43,12 +47,30 @@ from robots.hexapod.legs import servo_targets, step_params
 from robots.hexapod.vision import FORWARD, vision_params
 from spikejax.vision import dvs, edges
 
-__all__ = ["FRAME_S", "N_FRAMES", "CAPACITY", "g1_step_tracks", "ordered_readout", "Decision", "decide", "truth"]
+__all__ = [
+    "FRAME_S",
+    "N_FRAMES",
+    "CAPACITY",
+    "MAX_PER_PIXEL",
+    "capacity",
+    "g1_step_tracks",
+    "ordered_readout",
+    "Decision",
+    "decide",
+    "truth",
+]
 
 FRAME_S = 0.02
 N_FRAMES = 17  # the standing frame and 16 frames over the 0.32 s cycle
-CAPACITY = 8192  # events a frame interval; the overflow is counted
+CAPACITY = 8192  # events a frame interval on the 160 x 256 sensor; the overflow is counted
+MAX_PER_PIXEL = 4  # events a pixel and frame interval; the crossings beyond are counted apart
 _DVS = dvs.dvs_params(threshold_sigma=0.03, noise_rate=0.5)
+
+
+def capacity(config: edges.EdgeConfig) -> int:
+    """`CAPACITY` scaled to ``config``'s pixels (204,800 at the paper's 800 x 1280)."""
+    base = cam.EDGE_CONFIG.height * cam.EDGE_CONFIG.width
+    return -(-CAPACITY * config.height * config.width // base)
 
 
 def g1_step_tracks(draws: list[tuple], *, nthread: int | None = None) -> np.ndarray:
@@ -119,7 +141,9 @@ class Decision(NamedTuple):
             reaching the gait neurons one by one (`ordered_readout`).
         window_counts: layer-3 spikes, ``(8, 12, 2)``.
         events, filter_spikes, layer2_spikes: totals over the step.
-        overflow: events that did not fit in `CAPACITY` (0 when all fit).
+        overflow: events that did not fit in `capacity` (0 when all fit).
+        clipped: threshold crossings beyond `MAX_PER_PIXEL` a pixel and frame
+            interval, made into no event (`spikejax.vision.dvs.crossings`).
     """
 
     gait: jax.Array
@@ -132,6 +156,7 @@ class Decision(NamedTuple):
     filter_spikes: jax.Array
     layer2_spikes: jax.Array
     overflow: jax.Array
+    clipped: jax.Array
 
 
 def truth(scene: prey_mod.PreyScene, torso0) -> jax.Array:
@@ -139,21 +164,32 @@ def truth(scene: prey_mod.PreyScene, torso0) -> jax.Array:
     return prey_mod.truth_gait(scene, cam.ground_pose(torso0), cam.D_NEAR + 0.5 * scene.size[0])
 
 
-def frames(track: jax.Array, scene: prey_mod.PreyScene) -> jax.Array:
+def frames(track: jax.Array, scene: prey_mod.PreyScene, camera=cam.CAMERA) -> jax.Array:
     """The head camera's frames along a torso track (from the origin), ``(N_FRAMES, height, width)``."""
     world = cam.prey_scene(scene)
     track = _to_scene_frame(jnp.asarray(track, jnp.float32), scene.start)
-    return jax.vmap(lambda torso: cam.frame(torso, world))(track)
+    return jax.vmap(lambda torso: cam.frame(torso, world, camera))(track)
 
 
-def decide(track: jax.Array, scene: prey_mod.PreyScene, key: jax.Array, with_spikes: bool = False):
+def decide(
+    track: jax.Array,
+    scene: prey_mod.PreyScene,
+    key: jax.Array,
+    with_spikes: bool = False,
+    *,
+    config: edges.EdgeConfig = cam.EDGE_CONFIG,
+):
     """Render, emulate, filter and choose along one torso track ``(N_FRAMES, 6)``: a `Decision`.
 
     With ``with_spikes`` also the per-frame ``(events count image, edges.Spikes)`` for figures.
+    ``config`` (static) is the sensor: the scaled `camera.EDGE_CONFIG`, or
+    `vision.PAPER_SENSOR` for the paper's 800 x 1280 pixels and 100-pixel
+    windows with its own weights (ACCEPTANCE A11); the camera's pose, lens,
+    DVS noise rate per pixel and the scene are the same.
     """
-    config = cam.EDGE_CONFIG
     params = vision_params(config)
-    images = frames(track, scene)
+    cap = capacity(config)
+    images = frames(track, scene, cam.sensor_camera(config))
     times = jnp.arange(N_FRAMES, dtype=jnp.float32) * FRAME_S
     k_init, k_steps = jax.random.split(key)
     dvs_state = dvs.init(_DVS, images[0], times[0], key=k_init)
@@ -163,9 +199,10 @@ def decide(track: jax.Array, scene: prey_mod.PreyScene, key: jax.Array, with_spi
     inputs_of = params.readout > 0
 
     def body(carry, inputs):
-        dvs_state, snn, overflow, (v_ord, t_ord, n_ord) = carry
+        dvs_state, snn, (overflow, clipped), (v_ord, t_ord, n_ord) = carry
         image, t, k = inputs
-        dvs_state, events, lost = dvs.step(_DVS, dvs_state, image, t, capacity=CAPACITY, key=k)
+        clip = jnp.sum(jnp.maximum(dvs.crossings(_DVS, dvs_state, image) - MAX_PER_PIXEL, 0))
+        dvs_state, events, lost = dvs.step(_DVS, dvs_state, image, t, capacity=cap, max_per_pixel=MAX_PER_PIXEL, key=k)
         count = edges.count_image(config, events)
         snn, spikes = edges.sync_step(config, params, snn, count, t)
         n_in = jnp.sum(inputs_of & spikes.windows[None], axis=(1, 2, 3))
@@ -174,13 +211,14 @@ def decide(track: jax.Array, scene: prey_mod.PreyScene, key: jax.Array, with_spi
         fires, v_new = ordered_readout(v_leaked, n_in, w_out, params.v_th)
         ordered = (jnp.where(touched, v_new, v_ord), jnp.where(touched, t, t_ord), n_ord + fires)
         out = (count, spikes) if with_spikes else None
-        return (dvs_state, snn, overflow + lost, ordered), out
+        return (dvs_state, snn, (overflow + lost - clip, clipped + clip), ordered), out
 
     keys = jax.random.split(k_steps, N_FRAMES - 1)
     zeros = jnp.zeros((config.n_out,), jnp.float32)
     ordered0 = (zeros, zeros + times[0], jnp.zeros((config.n_out,), jnp.int32))
-    (_, snn, overflow, (_, _, n_ordered)), per_frame = jax.lax.scan(
-        body, (dvs_state, snn, jnp.zeros((), jnp.int32), ordered0), (images[1:], times[1:], keys)
+    zero = jnp.zeros((), jnp.int32)
+    (_, snn, (overflow, clipped), (_, _, n_ordered)), per_frame = jax.lax.scan(
+        body, (dvs_state, snn, (zero, zero), ordered0), (images[1:], times[1:], keys)
     )
     c = snn.counts
     decision = Decision(
@@ -194,5 +232,6 @@ def decide(track: jax.Array, scene: prey_mod.PreyScene, key: jax.Array, with_spi
         filter_spikes=c["filter"],
         layer2_spikes=c["layer2"],
         overflow=overflow,
+        clipped=clipped,
     )
     return (decision, per_frame) if with_spikes else decision

@@ -3,16 +3,23 @@
 ``N`` random scenes (default 2,000): scene ``i`` has ``1 + i % 4`` prey
 (`prey.sample_scene`, distances 0.3-3 m, bearings within +-20 deg, its key
 ``fold_in(key(seed), i)``), its own randomised robot walking one G1 cycle from
-rest and its own DVS noise (`robots.hexapod.decisions`). Writes, in ``--out DIR``:
+rest and its own DVS noise (`robots.hexapod.decisions`). Beside them
+``--empty M`` empty arenas (default 200; no prey, so the truth is G1: the
+robot keeps walking) and, with ``--full-check K``, the first ``K`` scenes again
+at the paper's 800 x 1280 sensor with its 100-pixel windows and own weights
+(ACCEPTANCE A11: the scaled network's agreement with the full one). Writes, in
+``--out DIR``:
 
 - ``hexapod_decisions.csv``: accuracy (the winner-take-all's gait equal to
   `prey.truth_gait`) with its 95 % Wilson interval, overall, by number of prey,
   by the nearest prey's distance from the camera, by its gap to the second
   nearest, by the truth's gait, and over the scenes with one near prey and at
-  least one far one (ACCEPTANCE A6's "nearest" mechanism), for
-  both readouts: ``frame`` (`edges.sync_step`'s, at most one gait spike a
-  frame) and ``ordered`` (the frame's layer-3 spikes reaching the gait neurons
-  one by one, `decisions.ordered_readout`);
+  least one far one (ACCEPTANCE A6's "nearest" mechanism); the empty arenas
+  (``empty``: G1 or no gait spike); the full-resolution check (``full_check``:
+  agreement, and each sensor's accuracy on those scenes); for both readouts:
+  ``frame`` (`edges.sync_step`'s, at most one gait spike a frame) and
+  ``ordered`` (the frame's layer-3 spikes reaching the gait neurons one by one,
+  `decisions.ordered_readout`);
 - ``hexapod_confusion.csv``: the confusion matrices (truth by decision), both readouts;
 - ``hexapod_decisions.png``: the Fig. 7 counterpart for a near and a far scene:
   the step's DVS events, the filter's spikes, the layer-3 windows' spikes (the
@@ -21,6 +28,7 @@ rest and its own DVS noise (`robots.hexapod.decisions`). Writes, in ``--out DIR`
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import jax
@@ -34,20 +42,24 @@ from robots.hexapod import camera as cam
 from robots.hexapod import decisions, physics
 from robots.hexapod import prey as prey_mod
 from robots.hexapod.gaits import GAIT_NAMES
-from robots.hexapod.vision import regions
-from spikejax.commands import Command, count, output_directory
+from robots.hexapod.vision import FORWARD, PAPER_SENSOR, regions
+from spikejax.commands import Command, count, count_or_zero, output_directory, positive_float
 from spikejax.stats import wilson_interval
 
 HEADER = ["readout", "group", "value", "scenes", "correct", "accuracy", "ci_low", "ci_high"]
 READOUTS = {"frame": "gait", "ordered": "gait_ordered"}  # column of the CSV -> field of the Decision
 DISTANCE_BINS = (0.3, 0.35, 0.4, 0.45, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 _CHUNK = 64
+_FULL_CHUNK = 2  # scenes a batch at 800 x 1280 (25 times the pixels)
 
 
-def scenes(seed: int, index: jax.Array) -> prey_mod.PreyScene:
-    """Scene ``index`` of the reproduction: ``1 + index % 4`` prey, its key folded from ``seed`` and ``index``."""
+def scenes(
+    seed: int, index: jax.Array, n_prey: jax.Array | None = None, size: float = prey_mod.PREY_SIZE
+) -> prey_mod.PreyScene:
+    """Scene ``index`` of the reproduction: ``n_prey`` prey (default ``1 + index % 4``), its key from ``seed`` and ``index``."""
     key = jax.random.fold_in(jax.random.key(seed), index)
-    return prey_mod.sample_scene(jax.random.fold_in(key, 0), 1 + index % 4, distance=(0.3, 3.0))
+    n = 1 + index % 4 if n_prey is None else n_prey
+    return prey_mod.sample_scene(jax.random.fold_in(key, 0), n, distance=(0.3, 3.0), size=size)
 
 
 def _keys(seed: int, index: jax.Array) -> jax.Array:
@@ -133,52 +145,84 @@ def _plot(path: Path, examples) -> None:
     fig.savefig(path, dpi=110)
 
 
-def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bool = False) -> int:
-    """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--seed S]``: the module docstring's files.
+def _decide_all(draws, index, n_prey, seed, size, config, chunk, bar) -> dict:
+    """Every scene's `decisions.Decision` fields and nearest distances, as NumPy arrays, ``chunk`` scenes a batch."""
+    step = jax.jit(
+        jax.vmap(
+            lambda track, i, n: (
+                decisions.decide(track, scenes(seed, i, n, size), _keys(seed, i), config=config),
+                _nearest_from_camera(scenes(seed, i, n, size), track[0]),
+            )
+        )
+    )
+    parts = []
+    for start in range(0, len(index), chunk):
+        stop = min(start + chunk, len(index))
+        tracks = decisions.g1_step_tracks(draws[start:stop])
+        idx, n = index[start:stop], n_prey[start:stop]
+        pad = chunk - (stop - start)  # one compiled batch size
+        tracks = np.concatenate([tracks, np.repeat(tracks[-1:], pad, 0)])
+        idx, n = (np.concatenate([a, np.repeat(a[-1:], pad)]) for a in (idx, n))
+        d, near = step(jnp.asarray(tracks), jnp.asarray(idx, jnp.int32), jnp.asarray(n, jnp.int32))
+        part = {k: np.asarray(v)[: stop - start] for k, v in d._asdict().items() if k in _KEPT}
+        part["nearest"], part["second"] = (np.asarray(near)[: stop - start, j] for j in (0, 1))
+        parts.append(part)
+        bar.update(stop - start)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+_KEPT = ("gait", "gait_ordered", "truth", "out_counts", "overflow", "clipped", "events")
+
+
+def run(
+    *,
+    out: str | Path,
+    scenes_n: int = 2000,
+    seed: int = 0,
+    empty_n: int = 200,
+    full_check: int = 0,
+    prey_size: float = prey_mod.PREY_SIZE,
+    no_progress: bool = False,
+) -> int:
+    """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--empty M] [--full-check K] [--prey-size S] [--seed S]``.
 
     Args:
         out: output directory.
-        scenes_n: random scenes.
+        scenes_n: random scenes with 1-4 prey.
         seed: seed of the scenes, the robots' randomisation and the DVS noise.
+        empty_n: empty arenas (no prey: the truth is G1, keep walking), scenes
+            ``scenes_n .. scenes_n + empty_n - 1``, each its own robot and noise.
+        full_check: the first ``full_check`` scenes also at the paper's 800 x 1280
+            sensor (ACCEPTANCE A11): the agreement of the two decisions.
+        prey_size: the cubes' edge, m (`prey.PREY_SIZE`; 0.1 gives the cubes as tall as the camera).
         no_progress: hide the progress bar.
     """
     with output_directory(out, command="reproduce hexapod-decisions") as out:
-        draws = physics.randomised(scenes_n, seed=seed)
-        step = jax.jit(
-            jax.vmap(
-                lambda track, i: (
-                    decisions.decide(track, scenes(seed, i), _keys(seed, i)),
-                    _nearest_from_camera(scenes(seed, i), track[0]),
-                )
-            )
-        )
-        parts = []
-        with tqdm(total=scenes_n, desc="hexapod decisions", unit="scene", disable=no_progress) as bar:
-            for start in range(0, scenes_n, _CHUNK):
-                stop = min(start + _CHUNK, scenes_n)
-                tracks = decisions.g1_step_tracks(draws[start:stop])
-                index = np.arange(start, stop)
-                pad = _CHUNK - (stop - start)  # one compiled batch size
-                tracks = np.concatenate([tracks, np.repeat(tracks[-1:], pad, 0)])
-                index = np.concatenate([index, np.repeat(index[-1:], pad)])
-                d, near = step(jnp.asarray(tracks), jnp.asarray(index, jnp.int32))
-                parts.append(
-                    {
-                        "gait": np.asarray(d.gait)[: stop - start],
-                        "gait_ordered": np.asarray(d.gait_ordered)[: stop - start],
-                        "truth": np.asarray(d.truth)[: stop - start],
-                        "nearest": np.asarray(near)[: stop - start, 0],
-                        "second": np.asarray(near)[: stop - start, 1],
-                        "overflow": np.asarray(d.overflow)[: stop - start],
-                        "events": np.asarray(d.events)[: stop - start],
-                    }
-                )
-                bar.update(stop - start)
-        res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-        n_prey = 1 + np.arange(scenes_n) % prey_mod.MAX_PREY
+        draws = physics.randomised(scenes_n + empty_n, seed=seed)
+        index = np.arange(scenes_n + empty_n)
+        n_prey = np.where(index < scenes_n, 1 + index % prey_mod.MAX_PREY, 0)
+        total = scenes_n + empty_n + min(full_check, scenes_n)
+        with tqdm(total=total, desc="hexapod decisions", unit="scene", disable=no_progress) as bar:
+            res = _decide_all(draws, index, n_prey, seed, prey_size, cam.EDGE_CONFIG, _CHUNK, bar)
+            full = None
+            if full_check:
+                k = min(full_check, scenes_n)
+                full = _decide_all(draws[:k], index[:k], n_prey[:k], seed, prey_size, PAPER_SENSOR, _FULL_CHUNK, bar)
+        prey_rows = index < scenes_n
+        sub = {k: v[prey_rows] for k, v in res.items()}
+        empty = {k: v[~prey_rows] for k, v in res.items()}
         rows, confusions = [], {}
         for readout, field in READOUTS.items():
-            r, confusions[readout] = summarize(res[field], res["truth"], n_prey, res["nearest"], res["second"])
+            r, confusions[readout] = summarize(
+                sub[field], sub["truth"], n_prey[prey_rows], sub["nearest"], sub["second"]
+            )
+            if empty_n:
+                r.append(_row("empty", "G1 or silent", empty[field] == FORWARD))
+            if full is not None:
+                n_full = len(full[field])
+                r.append(_row("full_check", "agreement", full[field] == sub[field][:n_full]))
+                r.append(_row("full_check", "full accuracy", full[field] == full["truth"]))
+                r.append(_row("full_check", "scaled accuracy", sub[field][:n_full] == sub["truth"][:n_full]))
             rows += [[readout, *row] for row in r]
         write_csv(out / "hexapod_decisions.csv", HEADER, rows)
         write_csv(
@@ -189,24 +233,39 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
         examples = []
         for title, want in (
             ("near prey", lambda i: res["truth"][i] != 0),
-            ("far prey", lambda i: res["truth"][i] == 0),
+            ("far prey", lambda i: res["truth"][i] == 0 and n_prey[i] > 0),
         ):
             i = next((i for i in range(scenes_n) if want(i)), None)
             if i is not None:
                 track = jnp.asarray(decisions.g1_step_tracks([draws[i]])[0])
                 j = jnp.int32(i)
-                examples.append((title, *decisions.decide(track, scenes(seed, j), _keys(seed, j), with_spikes=True)))
+                scene = scenes(seed, j, size=prey_size)
+                examples.append((title, *decisions.decide(track, scene, _keys(seed, j), with_spikes=True)))
         if examples:
             _plot(out / "hexapod_decisions.png", examples)
         for r in rows:
-            print(f"{r[0]:<9}{r[1]:<10}{r[2]:<16}{r[3]:>6}  {r[5]:.3f} [{r[6]:.3f}, {r[7]:.3f}]")
+            print(f"{r[0]:<9}{r[1]:<12}{r[2]:<16}{r[3]:>6}  {r[5]:.3f} [{r[6]:.3f}, {r[7]:.3f}]")
         for k, c in confusions.items():
             print(f"confusion, {k} readout (rows truth, columns chosen: G1, G2, G3):")
             print(c)
-        print(f"events a step: median {int(np.median(res['events']))}; clipped crossings a step: "
-              f"median {int(np.median(res['overflow']))} (dvs max_per_pixel and capacity overflow)")  # fmt: skip
+        if empty_n:
+            silent = int((empty["out_counts"].sum(-1) == 0).sum())
+            print(f"empty arenas: {silent} of {empty_n} with no gait spike")
         print(
-            f"d_near = {cam.D_NEAR:.3f} m from the camera (height {cam.camera_height():.3f} m, tilt {cam.TILT_DEG:g} deg)"
+            f"events a step: median {int(np.median(res['events']))}, max {int(res['events'].max())}; "
+            f"events beyond the capacity ({decisions.CAPACITY} a frame): median {int(np.median(res['overflow']))}, "
+            f"max {int(res['overflow'].max())}; crossings beyond {decisions.MAX_PER_PIXEL} a pixel and frame: "
+            f"median {int(np.median(res['clipped']))} a step"
+        )
+        if full is not None:
+            print(
+                f"at 800 x 1280: events a step median {int(np.median(full['events']))}; beyond the capacity "
+                f"({decisions.capacity(PAPER_SENSOR)} a frame): max {int(full['overflow'].max())}; crossings beyond "
+                f"{decisions.MAX_PER_PIXEL} a pixel and frame: median {int(np.median(full['clipped']))} a step"
+            )
+        print(
+            f"d_near = {cam.D_NEAR:.3f} m from the camera (height {cam.camera_height():.3f} m, tilt {cam.TILT_DEG:g} deg); "
+            f"prey cubes of {prey_size:g} m"
         )
         print(
             f"wrote {out / 'hexapod_decisions.csv'}, {out / 'hexapod_confusion.csv'} and {out / 'hexapod_decisions.png'}"
@@ -214,9 +273,34 @@ def run(*, out: str | Path, scenes_n: int = 2000, seed: int = 0, no_progress: bo
         return 0
 
 
+def _prey_size(text: str) -> float:
+    """``argparse`` type of ``--prey-size``: a cube's edge in (0, 1] m, as a scene file takes."""
+    value = positive_float(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"must be at most 1 m, got {text}")
+    return value
+
+
 def _add_arguments(parser) -> None:
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--scenes", dest="scenes_n", type=count, default=2000, help="random scenes (default 2000)")
+    parser.add_argument(
+        "--empty", dest="empty_n", type=count_or_zero, default=200, help="empty arenas, no prey (default 200)"
+    )
+    parser.add_argument(
+        "--full-check",
+        dest="full_check",
+        type=count_or_zero,
+        default=0,
+        help="the first K scenes also at the paper's 800 x 1280 sensor: agreement (ACCEPTANCE A11; default 0)",
+    )
+    parser.add_argument(
+        "--prey-size",
+        dest="prey_size",
+        type=_prey_size,
+        default=prey_mod.PREY_SIZE,
+        help=f"the prey cubes' edge, m (default {prey_mod.PREY_SIZE:g})",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of scenes, robots and DVS noise (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 

@@ -35,6 +35,7 @@ __all__ = [
     "add_common",
     "add_cpu_devices",
     "count",
+    "count_or_zero",
     "output_directory",
     "positive_float",
     "run_parameters",
@@ -97,6 +98,17 @@ def count(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def count_or_zero(text: str) -> int:
+    """``argparse`` type of a count that may be 0 (an optional extra study: ``--empty 0`` skips it)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0, got {value}")
     return value
 
 

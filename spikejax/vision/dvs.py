@@ -42,6 +42,7 @@ __all__ = [
     "DVSState",
     "dvs_params",
     "init",
+    "crossings",
     "step",
     "emulate",
 ]
@@ -176,6 +177,19 @@ def init(params: DVSParams, frame: jax.Array, t0=0.0, *, key: jax.Array) -> DVSS
     )
 
 
+def crossings(params: DVSParams, state: DVSState, frame: jax.Array) -> jax.Array:
+    """How many thresholds each pixel's log intensity crosses from its reference to ``frame``, ``(height, width)`` int32.
+
+    `step` makes at most ``max_per_pixel`` of them into events and counts the
+    rest as overflow; ``jnp.maximum(crossings - max_per_pixel, 0).sum()`` is that
+    share of its overflow, the remainder the events beyond ``capacity``.
+    """
+    log_frame = jnp.log(jnp.asarray(frame, jnp.float32) + params.eps)
+    up = log_frame >= state.reference
+    c = jnp.where(up, state.pos_threshold, state.neg_threshold)
+    return jnp.floor(jnp.abs(log_frame - state.reference) / c).astype(jnp.int32)
+
+
 def step(
     params: DVSParams,
     state: DVSState,
@@ -209,7 +223,7 @@ def step(
     ref, l0, l1 = state.reference, state.log_frame, log_frame
     up = l1 >= ref
     c = jnp.where(up, state.pos_threshold, state.neg_threshold)
-    n = jnp.floor(jnp.abs(l1 - ref) / c).astype(jnp.int32)
+    n = crossings(params, state, frame)
     direction = jnp.where(up, 1.0, -1.0)
     slope = l1 - l0
     safe = jnp.where(slope == 0, 1.0, slope)
