@@ -10,6 +10,7 @@ nbclient = pytest.importorskip("nbclient")
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 
 
+@pytest.mark.slow  # 37 s at load 8 on 2 cores (kernel, imports, the env's step compiled), above the 20 s of a fast one
 def test_snake_pipe_notebook_executes(monkeypatch):
     monkeypatch.setenv("SPIKEJAX_NB_PIPE_STEPS", "40")
     nb = nbformat.read(NOTEBOOKS / "snake_pipe.ipynb", as_version=4)

@@ -36,6 +36,7 @@ def run():
     return env, jax.jit(jax.vmap(episode))(jax.random.split(jax.random.key(3), 2))
 
 
+@pytest.mark.slow  # the fixture compiles the env: 8 s at load 1.5 on 2 cores, 23 s at load 8
 def test_contrast_events_carry_times_inside_their_step(run):
     _, (t0, t1, _, _, events, _) = run
     valid, t = np.asarray(events.valid), np.asarray(events.t)
@@ -50,6 +51,7 @@ def test_contrast_events_carry_times_inside_their_step(run):
             assert np.all(np.diff(tk) >= 0)
 
 
+@pytest.mark.slow  # shares the fixture above
 def test_first_step_matches_the_contrast_threshold_model(run):
     env, (t0, t1, before, after, events, overflow) = run
     c, eps = float(env.dvs_params.pos_threshold), float(env.dvs_params.eps)

@@ -31,8 +31,11 @@ of the two has and the mean difference of the per-episode distance error
 and sign accuracy with 95 % Student-t intervals (`spikejax.stats.mean_interval`).
 
 On a lying pipe the circle grid runs in the chosen mode too; its
-asynchronous mode makes every event update 32 rings of cells and is slow on
-a CPU (docs/BENCHMARKS.md, "Snake pipe loop: sync against async").
+asynchronous mode updates a ring of cells at each radius for every event,
+about 200 events/s on a 2-core CPU for the full grid
+(`spikejax.commands.detect_pipe`), i.e. seconds per control step: the
+measured comparison (docs/BENCHMARKS.md, "Snake pipe loop: sync against
+async") is on standing pipes.
 """
 
 from __future__ import annotations
