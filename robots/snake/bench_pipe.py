@@ -467,7 +467,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=count, default=None, help="timed rounds, the best kept (default 3)")
     parser.add_argument("--stages", action="store_true", help="add the per-stage breakdown at --stage-batch")
     parser.add_argument("--stage-batch", type=count, default=None, help="the breakdown's batch (default 64)")
-    add_cpu_devices(parser, peers="nothing else")
+    add_cpu_devices(parser, peers="how the all-core rows split the batch")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
