@@ -168,3 +168,23 @@ def test_bad_configurations_are_one_line_errors():
     tracker = stream.Tracker(detect.Detector(line=hough.LineGrid(16, 16), circle=None, sub_slots=3))
     with pytest.raises(UserError, match=r"slot_steps must be within 1\.\.3"):
         stream.tracker_params(tracker, slot_steps=4)
+
+
+def test_circle_per_slot_is_one_sync_update_on_the_slots_events(both):
+    """``circle_per_slot``: the circle grid after each slot is `hough.sync_step` on all the slot's events at its end."""
+    tracker, params, ev, ts, angle, velocity = both[:6]
+    per_slot = stream.Tracker(tracker.detector, circle_per_slot=True)
+    state, _ = jax.jit(stream.run, static_argnums=0)(
+        per_slot, params, jax.tree.map(lambda a: a[1], ev), ts[1], angle[1], velocity[1]
+    )
+    grid, p = tracker.detector.circle, params.detector.circle
+    ref = stream.init(per_slot).grids.circle
+    fired_any = False
+    for s in range(SLOTS):
+        slot_events = jax.tree.map(lambda a: a[1, s].reshape(-1), ev)
+        ref, spikes = hough.sync_step(p, grid, ref, slot_events, ts[1][s, -1])
+        fired_any |= bool(np.any(np.asarray(spikes)))
+    np.testing.assert_array_equal(np.asarray(state.grids.circle.v), np.asarray(ref.v))
+    assert fired_any
+    with pytest.raises(UserError, match="circle_per_slot needs the synchronous mode"):
+        stream.Tracker(detect.Detector(mode="async"), circle_per_slot=True)

@@ -83,7 +83,16 @@ from robots.snake.physics import joint_qpos_index, make_physics, start_at
 from spikejax.errors import UserError
 from spikejax.vision import detect, dvs, hough, stream
 
-__all__ = ["CONTRAST_DVS", "DVS_MODELS", "PipeEnv", "PipeEnvParams", "default_tracker", "rollout"]
+__all__ = [
+    "CONTRAST_DVS",
+    "DVS_MODELS",
+    "PipeEnv",
+    "PipeEnvParams",
+    "default_tracker",
+    "rollout",
+    "rollout_slots",
+    "rollout_start",
+]
 
 DVS_MODELS = ("frame", "contrast")
 CONTRAST_DVS = dvs.dvs_params(pos_threshold=0.6, neg_threshold=0.6)
@@ -112,11 +121,14 @@ def default_tracker(circle: bool = False, sub_slots: int = 5) -> stream.Tracker:
 
     ``circle=True`` adds the circle grid (lying pipes' entries) at a reduced
     size (centres every pixel, radii 4-35 px: the ring of a 0.5 m entry
-    between 0.8 and 7 m), steering by the entry when it is seen, else the body.
+    between 0.8 and 7 m), updated once per slot on the slot's events
+    (`spikejax.vision.stream.Tracker`'s ``circle_per_slot``: its votes, a
+    convolution per radius, cost about ten times the line grid's), steering
+    by the entry when it is seen, else the body.
     """
     grid = hough.CircleGrid(n_r=32, r_min=4.0) if circle else None
     det = detect.Detector(line=hough.LineGrid(), circle=grid, mode="sync", sub_slots=sub_slots)
-    return stream.Tracker(det, window=SWING.window, target="any" if circle else "body")
+    return stream.Tracker(det, window=SWING.window, target="any" if circle else "body", circle_per_slot=circle)
 
 
 class PipeEnv(Env):
@@ -454,10 +466,23 @@ def rollout(env: PipeEnv, controller, controller_params, key: jax.Array, slots: 
     controller's mode and action, the head's floor position), leaves ``(slots * K, ...)``,
     and the final `brax.envs.base.State`. The episode runs on after ``done``
     (the record says when); the outcomes in ``metrics`` are latched.
+    `rollout_start` and `rollout_slots` are its two halves, for a loop that
+    runs an episode in parts (and stops once every episode of a batch is done).
     """
-    init, act = controller
+    carry = rollout_start(env, controller, key, scene, params)
+    (final, _), record = rollout_slots(env, controller, controller_params, carry, slots)
+    return record, final
+
+
+def rollout_start(env: PipeEnv, controller, key: jax.Array, scene=None, params=None):
+    """The carry of `rollout_slots` at an episode's start: ``(env.reset(key, scene, params), init())``."""
+    return env.reset(key, scene, params), controller[0]()
+
+
+def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int):
+    """``slots`` more slots from ``carry`` (`rollout_start`'s or an earlier call's): ``(carry, record)``."""
+    act = controller[1]
     k = env.slot_steps
-    state = env.reset(key, scene, params)
 
     def one(carry, end):
         s, c = carry
@@ -478,6 +503,6 @@ def rollout(env: PipeEnv, controller, controller_params, key: jax.Array, slots: 
         rec = jax.tree.map(lambda a, b: jnp.concatenate([a, b[None]]), inner, last)
         return carry, rec
 
-    (final, _), record = jax.lax.scan(slot, (state, init()), None, length=slots)
+    carry, record = jax.lax.scan(slot, carry, None, length=slots)
     record = jax.tree.map(lambda a: a.reshape((slots * k,) + a.shape[2:]), record)
-    return record, final
+    return carry, record

@@ -96,7 +96,12 @@ def env_for(mode: str, situation: str = "standing-right"):
         raise UserError(f"situation must be one of {', '.join(pipes.SITUATIONS)}, not {situation!r}")
     grid_mode, dvs = MODES[mode]
     tracker = pipe_env.default_tracker(circle=pipes.SITUATIONS[situation][0] == pipes.LYING)
-    tracker = dataclasses.replace(tracker, detector=dataclasses.replace(tracker.detector, mode=grid_mode))
+    # The circle grid once per slot is a synchronous update: the asynchronous mode updates it per event.
+    tracker = dataclasses.replace(
+        tracker,
+        detector=dataclasses.replace(tracker.detector, mode=grid_mode),
+        circle_per_slot=tracker.circle_per_slot and grid_mode == "sync",
+    )
     return pipe_env.PipeEnv(situation=situation, tracker=tracker, dvs=dvs)
 
 
@@ -116,7 +121,8 @@ def _episodes(env, keys, slots: int, progress: bool, desc: str):
         out = {k: record["metrics"][k] for k in keep}
         out.update(head=record["head"], action=record["action"])
         out.update(success=final.metrics["success"] > 0, reached=final.metrics["reached"] > 0)
-        out["success_step"] = final.info["success_step"]
+        hit = record["done"] > 0  # the episode's end: success, a collision, or the timeout
+        out["end_step"] = jnp.where(hit.any(), jnp.argmax(hit) + 1, hit.shape[0])
         return out
 
     n = keys.shape[0]
@@ -138,9 +144,7 @@ def _episodes(env, keys, slots: int, progress: bool, desc: str):
 def _per_episode(res, slot_steps: int):
     """Each episode's mean distance error and sign accuracy at its detections (NaN where it has none)."""
     det = res["detected"] > 0
-    steps = det.shape[1]
-    end = np.where(res["success_step"] > 0, res["success_step"], steps)
-    used = det & (np.arange(steps)[None, :] < end[:, None])
+    used = det & (np.arange(det.shape[1])[None, :] < res["end_step"][:, None])
     err = np.abs(res["d_est"] - res["depth"])
     strong = used & (np.abs(res["offset_true"]) >= 0.15)
     ok = np.sign(res["offset_est"]) == np.sign(res["offset_true"])
@@ -198,7 +202,7 @@ def compare_modes(out_dir, episodes: int = 16, seconds: float = 30.0, situation:
         env = env_for(mode, situation)
         slots = max(1, int(round(seconds / env.dt / env.slot_steps)))
         res, wall, compile_s = _episodes(env, keys, slots, progress, f"{situation}, {mode}")
-        row = dict(zip(HEADER, summarize(mode, res, lying, env.dt, env.slot_steps, lost)))
+        row = dict(zip(HEADER, summarize(mode, "bang-bang", res, lying, env.dt, env.slot_steps, lost)))
         steps = slots * env.slot_steps
         det = env.tracker.detector
         row.update(

@@ -9,11 +9,15 @@ same trial, a check of determinism more than a sample). Each episode is
 `robots.snake.pipe_env.PipeEnv` driven by the spiking bang-bang controller
 (`robots.snake.pipe_controller.bang_bang`) for ``--seconds``; standing pipes
 with the line grid, lying ones with the line and the reduced circle grid
-(`robots.snake.pipe_env.default_tracker`).
+(`robots.snake.pipe_env.default_tracker`). The first ``--baselines``
+episodes of each situation run again, the same placements and keys, going
+straight and with the privileged controller (the true side of the pipe):
+the lower and upper bounds of the bang-bang law. A batch of episodes stops
+once all of them are done (success, or a collision with a standing pipe).
 
 Writes, in ``--out DIR``:
 
-- ``snake_pipe.csv``, one row per situation (or scene pipe): episodes,
+- ``snake_pipe.csv``, one row per situation (or scene pipe) and controller: episodes,
   successes with the 95 % Wilson interval (standing: the head within 0.3 m of
   the surface; lying: the head in the bore), approaches (the head within 0.3 m
   of the pipe or its entry), mean time to success, mean |Eq. (8) distance -
@@ -29,15 +33,14 @@ Writes, in ``--out DIR``:
 - ``snake_pipe_trajectories.png``: the head's path of every episode, per
   situation, with the pipes drawn at their places.
 
-Defaults: 256 episodes per situation of 90 s each (ACCEPTANCE.md's standing
-episode; at about 0.1 m/s the farthest starts, 4 m, need 40 s straight). The
-full run has not been timed on this machine; the lying situations, with the
-circle grid, run at about 66 env-steps/s (docs/BENCHMARKS.md). A measured
-small run is in docs/BENCHMARKS.md, "Snake pipe loop".
+Defaults: 256 episodes per situation of 60 s each (at about 0.1 m/s the
+farthest starts, 4 m, need 40 s straight), 64 of them with the baselines.
+Timings and results: docs/BENCHMARKS.md, "Snake pipe loop".
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import jax
@@ -54,6 +57,7 @@ from spikejax.errors import UserError
 LABELS = ("never_detected", "missed_bore", "wrong_side", "overshoot", "lost", "timeout")
 HEADER = [
     "situation",
+    "controller",
     "episodes",
     "successes",
     "success_rate",
@@ -67,6 +71,8 @@ HEADER = [
     *(f"fail_{label}" for label in LABELS),
 ]
 CHUNK = 64  # episodes per compiled batch
+CIRCLE_CHUNK = 16  # with the circle grid: its (32, 128, 128) state and spectra per episode outgrow the cache
+SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
 
 def label_failures(success, approached, lying, detected, sign_right, depth_end, last_seen_slots, lost_slots):
@@ -84,31 +90,77 @@ def label_failures(success, approached, lying, detected, sign_right, depth_end, 
     return np.where(success, -1, labels)
 
 
-def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str):
-    from tqdm import tqdm
+def _pad(a: np.ndarray, steps: int, edge: bool) -> np.ndarray:
+    """``a`` ``(n, t, ...)`` padded along time to ``steps``: with its last value (``edge``) or zeros."""
+    if a.shape[1] >= steps:
+        return a[:, :steps]
+    width = [(0, 0), (0, steps - a.shape[1])] + [(0, 0)] * (a.ndim - 2)
+    return np.pad(a, width, mode="edge" if edge else "constant")
 
+
+@functools.cache
+def _programs(env):
+    """The jitted episode start and `SEGMENT` of slots of ``env`` under `robots.snake.pipe_controller.switch`.
+
+    One pair per env serves every controller (the switch is traced), situation of its kind and chunk.
+    """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env
 
-    run = jax.jit(jax.vmap(lambda k, s: pipe_env.rollout(env, pc.bang_bang, params, k, slots, s)))
-    keep = ("detected", "d_est", "depth", "offset_est", "offset_true", "in_view")
+    start = jax.jit(jax.vmap(lambda k, s: pipe_env.rollout_start(env, pc.switch, k, s)))
+    segment = jax.jit(jax.vmap(lambda c, p: pipe_env.rollout_slots(env, pc.switch, p, c, SEGMENT)))
+    return start, segment
+
+
+def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size: int = CHUNK):
+    """Each episode of ``keys`` / ``scenes`` for ``slots`` slots, ``CHUNK`` at a time, with `robots.snake.pipe_controller.switch`.
+
+    Chunks of ``size`` episodes (the last padded with repeats), so that
+    every call has one batch shape. A chunk runs ``SEGMENT`` slots at a time and stops once every episode in
+    it is done (success or a collision with a standing pipe; ``env`` times
+    out at the run's length): the rest of its record is padded (outcomes and
+    positions held, detections and actions 0), as the record of a finished
+    episode is never read past its end.
+    """
+    from tqdm import tqdm
+
+    start, segment = _programs(env)
+    zero_pad = ("detected", "in_view")
+    keep = ("detected", "d_est", "depth", "offset_est", "offset_true", "in_view", "success", "reached")
+    steps = slots * env.slot_steps
     parts = []
     n = keys.shape[0]
-    for lo in tqdm(range(0, n, CHUNK), desc=desc, disable=not progress):
-        idx = np.arange(lo, min(lo + CHUNK, n))
-        pad = np.concatenate([idx, np.full(CHUNK - idx.size, idx[-1])]) if n > CHUNK else idx
-        record, final = run(keys[pad], jax.tree.map(lambda a: a[pad], scenes))
-        out = {k: np.asarray(record["metrics"][k])[: idx.size] for k in keep}
-        out["head"] = np.asarray(record["head"])[: idx.size]
-        out["action"] = np.asarray(record["action"])[: idx.size]
-        for k in ("success", "reached"):
-            out[k] = np.asarray(final.metrics[k])[: idx.size] > 0
-        out["success_step"] = np.asarray(final.info["success_step"])[: idx.size]
+    bar = tqdm(total=n, desc=desc, disable=not progress, unit="episode")
+    for lo in range(0, n, size):
+        idx = np.arange(lo, min(lo + size, n))
+        pad = np.concatenate([idx, np.full(size - idx.size, idx[-1])])  # one batch shape: one compile
+        chunk_params = jax.tree.map(lambda a: a[pad], params)
+        carry = start(keys[pad], jax.tree.map(lambda a: a[pad], scenes))
+        records, run_slots = [], 0
+        while run_slots < slots:
+            carry, record = segment(carry, chunk_params)
+            record = jax.tree.map(lambda a: np.asarray(a)[: idx.size], record)
+            records.append(record)
+            run_slots += SEGMENT
+            if np.all(np.asarray(carry[0].done)[: idx.size] > 0):
+                break
+        record = jax.tree.map(lambda *a: np.concatenate(a, axis=1), *records)
+        out = {k: _pad(record["metrics"][k], steps, k not in zero_pad) for k in keep}
+        out["head"] = _pad(record["head"], steps, True)
+        out["action"] = _pad(record["action"], steps, False)
+        out["done"] = _pad(record["done"], steps, True)
         parts.append(out)
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        bar.update(idx.size)
+    bar.close()
+    res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    for k in ("success", "reached"):
+        res[k] = res[k][:, -1] > 0
+    hit = res.pop("done") > 0
+    res["end_step"] = np.where(hit.any(1), hit.argmax(1) + 1, steps)  # steps up to and including the end
+    return res
 
 
-def summarize(name, res, lying: bool, dt: float, slot_steps: int, lost_slots: int) -> list:
+def summarize(name, controller, res, lying: bool, dt: float, slot_steps: int, lost_slots: int) -> list:
     """One CSV row from an `_episodes` result (host arrays)."""
     from spikejax.stats import wilson_interval
 
@@ -117,8 +169,8 @@ def summarize(name, res, lying: bool, dt: float, slot_steps: int, lost_slots: in
     low, high = wilson_interval(k, n)
     det = res["detected"] > 0
     # Outcomes are latched, but the record runs on after done: only the steps up to it count.
-    steps = res["detected"].shape[1]
-    end = np.where(res["success_step"] > 0, res["success_step"], steps)
+    end = res["end_step"]
+    steps = det.shape[1]
     live = np.arange(steps)[None, :] < end[:, None]
     used = det & live
     err = np.abs(res["d_est"] - res["depth"])[used]
@@ -143,10 +195,11 @@ def summarize(name, res, lying: bool, dt: float, slot_steps: int, lost_slots: in
         last_seen_slots,
         lost_slots,
     )
-    time = res["success_step"][res["success"]] * dt
+    time = res["end_step"][res["success"]] * dt
     rate = lambda a: float(np.mean(a)) if np.size(a) else float("nan")  # noqa: E731
     return [
         name,
+        controller,
         n,
         k,
         k / n,
@@ -180,7 +233,38 @@ def _plot(path: Path, results) -> None:
     fig.savefig(path, dpi=110)
 
 
-def run(out: Path, episodes: int, seconds: float, scene_file=None, progress: bool = True) -> list[list]:
+def _switch_params(machine, controller: str, n: int):
+    """`robots.snake.pipe_controller.SwitchParams` for ``n`` episodes of one controller (leaves ``(n,)``)."""
+    from robots.snake import pipe_controller as pc
+
+    params = pc.SwitchParams(machine, pc.CONTROLLERS[controller])
+    return jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (n,)), params)
+
+
+def _conditions(name, env, scenes, keys, slots, machine, baselines: int, progress: bool):
+    """The spiking controller on every episode, the baselines on the first ``baselines``: ``[(label, res, scenes)]``."""
+    out = []
+    for controller in ("bang-bang", "straight", "privileged"):
+        n = keys.shape[0] if controller == "bang-bang" else min(baselines, keys.shape[0])
+        if n == 0:
+            continue
+        sub = jax.tree.map(lambda a: a[:n], scenes)
+        params = _switch_params(machine, controller, n)
+        size = min(CIRCLE_CHUNK if env.tracker.detector.circle is not None else CHUNK, keys.shape[0])
+        res = _episodes(env, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size)
+        out.append((controller, res, sub))
+    return out
+
+
+def run(
+    out: Path,
+    episodes: int,
+    seconds: float,
+    scene_file=None,
+    progress: bool = True,
+    baselines: int = 64,
+    situations: list[str] | None = None,
+) -> list[list]:
     """Everything in the module docstring."""
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -189,9 +273,16 @@ def run(out: Path, episodes: int, seconds: float, scene_file=None, progress: boo
         raise UserError(f"--episodes must be at least 1, got {episodes}")
     if not seconds > 0:
         raise UserError(f"--seconds must be positive, got {seconds}")
+    if baselines < 0:
+        raise UserError(f"--baselines must be >= 0, got {baselines}")
     machine = pc.ControllerParams()
     rows, results = [], []
     keys = jax.random.split(jax.random.key(0), episodes)
+
+    def steps_for(env):
+        return max(1, int(round(seconds / env.dt / env.slot_steps)))
+
+    jobs = []  # (name, lying, env factory, scenes)
     if scene_file is not None:
         scene = pipes.load_scene(scene_file)
         scene = pipes.load_scene(scene_file, capacity=int(np.asarray(scene.valid).sum()))  # no empty slots to draw
@@ -200,22 +291,36 @@ def run(out: Path, episodes: int, seconds: float, scene_file=None, progress: boo
             order = np.array([slot] + [j for j in range(scene.capacity) if j != slot])
             target = scene._replace(**{f: getattr(scene, f)[order] for f in scene._fields if f != "start"})
             lying = int(np.asarray(scene.kind)[slot]) == pipes.LYING
-            env = pipe_env.PipeEnv(scene=target, tracker=pipe_env.default_tracker(circle=bool(lying)))
-            slots = max(1, int(round(seconds / env.dt / env.slot_steps)))
-            batch = jax.tree.map(lambda a: jnp.broadcast_to(a, (episodes, *a.shape)), target)
-            res = _episodes(env, batch, keys, slots, machine, progress, f"snake-pipe pipe {k + 1}")
+            batch = jax.tree.map(lambda a, t=target: jnp.broadcast_to(a, (episodes, *a.shape)), target)
             name = f"pipe {k + 1} ({'lying' if lying else 'standing'})"
-            rows.append(summarize(name, res, bool(lying), env.dt, env.slot_steps, int(machine.lost_slots)))
-            results.append((name, res, target))
+            jobs.append((name, bool(lying), dict(scene=target), batch))
     else:
-        for name, (kind, _) in pipes.SITUATIONS.items():
-            lying = kind == pipes.LYING
-            env = pipe_env.PipeEnv(situation=name, tracker=pipe_env.default_tracker(circle=lying))
-            slots = max(1, int(round(seconds / env.dt / env.slot_steps)))
+        # One env per kind of pipe (its grids and known size): left and right share its programs.
+        first = {}
+        chosen = list(pipes.SITUATIONS) if situations is None else situations
+        unknown = [name for name in chosen if name not in pipes.SITUATIONS]
+        if unknown or not chosen:
+            raise UserError(f"--situations takes names among {', '.join(pipes.SITUATIONS)}, not {unknown or chosen}")
+        for name in chosen:
+            kind = pipes.SITUATIONS[name][0]
+            first.setdefault(kind, name)
+            jobs.append((name, kind == pipes.LYING, dict(situation=first[kind]), None))
+    envs = {}
+    for name, lying, where, scenes in jobs:
+        key = tuple(sorted((k, id(v)) for k, v in where.items()))
+        if key not in envs:
+            env = pipe_env.PipeEnv(**where, tracker=pipe_env.default_tracker(circle=lying))
+            envs[key] = pipe_env.PipeEnv(
+                **where, tracker=pipe_env.default_tracker(circle=lying), max_steps=steps_for(env) * env.slot_steps
+            )
+        env = envs[key]
+        slots = steps_for(env)
+        if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
-            res = _episodes(env, scenes, keys, slots, machine, progress, f"snake-pipe {name}")
-            rows.append(summarize(name, res, lying, env.dt, env.slot_steps, int(machine.lost_slots)))
-            results.append((name, res, scenes))
+        for controller, res, sub in _conditions(name, env, scenes, keys, slots, machine, baselines, progress):
+            rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, int(machine.lost_slots)))
+            if controller == "bang-bang":
+                results.append((name, res, sub))
     write_csv(out / "snake_pipe.csv", HEADER, rows)
     _plot(out / "snake_pipe_trajectories.png", results)
     return rows
@@ -224,18 +329,39 @@ def run(out: Path, episodes: int, seconds: float, scene_file=None, progress: boo
 def _add_arguments(parser) -> None:
     add_common(parser)
     parser.add_argument("--episodes", type=int, default=256, help="episodes per situation (default 256)")
-    parser.add_argument("--seconds", type=float, default=90.0, help="simulated seconds per episode (default 90)")
+    parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per episode (default 60)")
     parser.add_argument("--scene", default=None, help="a scene file (TOML) used by every episode")
+    parser.add_argument(
+        "--situations",
+        type=lambda text: [name.strip() for name in text.split(",") if name.strip()],
+        default=None,
+        help="comma-separated situations to run (default all: standing-left, standing-right, lying-left, "
+        "lying-right); ignored with --scene",
+    )
+    parser.add_argument(
+        "--baselines",
+        type=int,
+        default=64,
+        help="episodes (the first of each situation) also run going straight and with the privileged controller "
+        "(default 64)",
+    )
 
 
 def reproduce_command_run(
-    *, out: str | Path, episodes: int = 256, seconds: float = 90.0, scene=None, no_progress: bool = False
+    *,
+    out: str | Path,
+    episodes: int = 256,
+    seconds: float = 60.0,
+    scene=None,
+    baselines: int = 64,
+    situations: list[str] | None = None,
+    no_progress: bool = False,
 ) -> int:
-    """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE]``."""
+    """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     with output_directory(out, command="reproduce snake-pipe") as out:
-        rows = run(out, episodes, seconds, scene, progress=not no_progress)
+        rows = run(out, episodes, seconds, scene, progress=not no_progress, baselines=baselines, situations=situations)
         for r in rows:
-            print(f"{r[0]:<22} {r[2]}/{r[1]} reached, 95% CI [{r[4]:.2f}, {r[5]:.2f}]")
+            print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
         print(f"wrote {out}/snake_pipe.csv, snake_pipe_trajectories.png")
         return 0
 

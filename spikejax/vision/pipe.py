@@ -43,6 +43,7 @@ Conventions
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -179,8 +180,9 @@ def spike_counts(spikes: jax.Array, n_grid_axes: int = 2) -> tuple[jax.Array, ja
     """
     spikes = jnp.asarray(spikes)
     axes = tuple(range(spikes.ndim - n_grid_axes))
-    positive = jnp.sum(spikes > 0, axis=axes, dtype=jnp.float32)
-    negative = jnp.sum(spikes < 0, axis=axes, dtype=jnp.float32)
+    # Counted in int32: a float32 sum over leading axes is a slow strided loop on XLA's CPU backend.
+    positive = jnp.sum(spikes > 0, axis=axes, dtype=jnp.int32).astype(jnp.float32)
+    negative = jnp.sum(spikes < 0, axis=axes, dtype=jnp.int32).astype(jnp.float32)
     return positive, negative
 
 
@@ -258,8 +260,8 @@ def find_body(
     n_updates, n_theta, n_rho = spikes.shape
     flat = spikes.reshape(n_updates, -1)
     fired_pos, fired_neg = flat > 0, flat < 0
-    positive = jnp.sum(fired_pos, axis=0, dtype=jnp.float32)
-    negative = jnp.sum(fired_neg, axis=0, dtype=jnp.float32)
+    positive = jnp.sum(fired_pos, axis=0, dtype=jnp.int32).astype(jnp.float32)  # see `spike_counts`
+    negative = jnp.sum(fired_neg, axis=0, dtype=jnp.int32).astype(jnp.float32)
     k = min(k, n_theta * n_rho)
     f_pos, f_neg = _fractions(strength, positive.shape)
     _, i_pos = jax.lax.top_k(positive + f_pos.reshape(-1), k)
@@ -390,7 +392,12 @@ def find_entry(
 def _near(image: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Pixels within one pixel (3 x 3) of a pixel with events, float32 0/1, padded by one pixel of zeros,
     and their share of the image (the chance that any pixel is near an event)."""
-    near = jax.lax.reduce_window((image > 0).astype(jnp.float32), 0.0, jax.lax.max, (3, 3), (1, 1), "SAME")
+    near = image > 0
+    for axis in range(2):  # a 3 x 3 box dilation as ORs of shifted slices (XLA's CPU reduce_window is slower)
+        n = near.shape[axis]
+        padded = jnp.pad(near, [(1, 1) if a == axis else (0, 0) for a in range(2)])
+        near = functools.reduce(jnp.logical_or, [jax.lax.slice_in_dim(padded, i, i + n, axis=axis) for i in range(3)])
+    near = near.astype(jnp.float32)
     return jnp.pad(near, 1), jnp.mean(near)
 
 
@@ -406,7 +413,7 @@ def _sample(near: jax.Array, x, y):
     inside = (xi >= 0) & (xi <= width - 1) & (yi >= 0) & (yi <= height - 1)
     xi = jnp.clip(xi, -1, width).astype(jnp.int32) + 1
     yi = jnp.clip(yi, -1, height).astype(jnp.int32) + 1
-    return jnp.where(inside, near[yi, xi], 0.0), inside
+    return jnp.where(inside, near.reshape(-1)[yi * (width + 2) + xi], 0.0), inside  # a flat gather is faster
 
 
 def line_support(image: jax.Array, theta, rho, origin: tuple[float, float] = (0.0, 0.0)) -> jax.Array:

@@ -96,16 +96,27 @@ class Tracker:
             velocity, control steps (1: no filter).
         target: which detection steers: ``"body"``, ``"entry"`` or ``"any"``
             (the entry when there is one, else the body).
+        circle_per_slot: update the circle grid once per slot, at its end, on
+            the slot's events (a synchronous slot of ``slot_steps`` steps),
+            instead of once per step: the same Alg. 1 update with a longer
+            time slot, one convolution of the slot's signed event image
+            instead of one a step (the circle grid's votes cost far more
+            than the line grid's). Synchronous mode only.
     """
 
     detector: detect.Detector = detect.Detector()
     interval: int = 10
     window: int = 1
     target: str = "any"
+    circle_per_slot: bool = False
 
     def __post_init__(self):
         if self.target not in TARGETS:
             raise UserError(f"target must be one of {', '.join(TARGETS)}, not {self.target!r}")
+        if self.circle_per_slot and self.detector.mode != "sync":
+            raise UserError("circle_per_slot needs the synchronous mode (the asynchronous grid updates per event)")
+        if self.circle_per_slot and (self.detector.circle is None or not _image_is_circle_sensor(self.detector)):
+            raise UserError("circle_per_slot needs a circle grid on the same sensor as the slot's event images")
         for name in ("interval", "window"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
@@ -173,7 +184,8 @@ class TrackerState(NamedTuple):
             ``(sub_slots, n_theta, n_rho)`` int8 (rows past ``steps`` are 0).
         line_votes: the slot's signed line votes.
         circle_counts: the slot's circle-grid spikes per neuron (both signs).
-        circle_votes: the slot's unsigned circle votes.
+        circle_votes: the slot's unsigned circle votes (zeros when the event images give them at the
+            slot's end, see `slot_end`).
         image: ``(positive, negative)`` events per pixel of the slot.
         steps: control steps in the slot so far (int32).
         angles, velocities: ``(window,)`` rings of the head joint's last
@@ -246,6 +258,16 @@ def init(tracker: Tracker, t0=0.0) -> TrackerState:
     )  # fmt: skip
 
 
+def _image_is_circle_sensor(det: detect.Detector) -> bool:
+    """Whether the slot's event images cover the circle grid's sensor, so its unsigned votes come from them.
+
+    By linearity the slot's unsigned circle votes are those of the slot's
+    event count image: one convolution at the slot's end, not one a step.
+    """
+    grid = det.line if det.line is not None else det.circle
+    return det.circle is not None and (grid.height, grid.width) == (det.circle.height, det.circle.width)
+
+
 def _grid_step(det, grid, params, state, events, t):
     if det.mode == "sync":
         return hough.sync_step(params, grid, state, events, t)
@@ -282,13 +304,18 @@ def step(
         state.circle_votes,
     )
     if det.line is not None:
-        line, spikes = _grid_step(det, det.line, params.detector.line, line, events, t)
+        votes = hough.line_votes(det.line, events)
+        if det.mode == "sync":
+            line, spikes = hough.sync_update(params.detector.line, line, votes, t)
+        else:
+            line, spikes = hough.async_step(params.detector.line, det.line, line, events)
         line_spikes = line_spikes.at[state.steps].set(spikes, mode="drop")
-        line_votes = line_votes + hough.line_votes(det.line, events)
-    if det.circle is not None:
+        line_votes = line_votes + votes
+    if det.circle is not None and not tracker.circle_per_slot:
         circle, spikes = _grid_step(det, det.circle, params.detector.circle, circle, events, t)
         circle_counts = circle_counts + (spikes != 0).astype(jnp.float32)
-        circle_votes = circle_votes + hough.circle_votes(det.circle, events, signed=False)
+        if not _image_is_circle_sensor(det):
+            circle_votes = circle_votes + hough.circle_votes(det.circle, events, signed=False)
     positive, negative = detect.event_images(det, events)
     ring = state.samples % tracker.window
     return state._replace(
@@ -324,9 +351,14 @@ def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) ->
         Alg. 3's histories carried on), and the `SlotOutput`.
     """
     det = tracker.detector
-    evidence = detect.Evidence(
-        state.line_spikes, state.line_votes, state.circle_counts, state.circle_votes, state.image
-    )
+    circle, circle_counts, circle_votes = state.grids.circle, state.circle_counts, state.circle_votes
+    if det.circle is not None and _image_is_circle_sensor(det):
+        circle_votes = hough.circle_image_votes(det.circle, state.image[0] + state.image[1])
+    if tracker.circle_per_slot:
+        signed = hough.circle_image_votes(det.circle, state.image[0] - state.image[1])
+        circle, spikes = hough.sync_update(params.detector.circle, circle, signed, t)
+        circle_counts = (spikes != 0).astype(jnp.float32)
+    evidence = detect.Evidence(state.line_spikes, state.line_votes, circle_counts, circle_votes, state.image)
     body, entry = detect.find_pipes(det, params.detector, evidence, t)
     angle = pp.mean_filter(state.angles, state.samples)
     velocity = pp.mean_filter(state.velocities, state.samples)
@@ -343,6 +375,7 @@ def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) ->
     control = jnp.where(seen, control, jnp.where(misses <= params.hold, state.control, 0)).astype(jnp.int32)
     line_spikes, line_votes, circle_counts, circle_votes, image = _slot_tallies(det)
     new = state._replace(
+        grids=detect.DetectorState(state.grids.line, circle),
         line_spikes=line_spikes,
         line_votes=line_votes,
         circle_counts=circle_counts,

@@ -104,9 +104,13 @@ def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576, merge: boo
     vote of their total weight (the accumulator is linear in the events:
     ``sum_e w_e T[pixel_e] = sum_pixels (sum of w_e at the pixel) T[pixel]``, in
     integers, so exactly), pixels whose events cancel are dropped, and the
-    remaining votes are packed to the front; chunks past the last vote are
-    skipped. A slot then costs votes for its active pixels, not for its events
-    or its capacity.
+    remaining votes are packed to the front. A slot then costs votes for its
+    active pixels, not for its events or its capacity.
+
+    Either way, chunks past the last valid event (or merged vote) are
+    skipped (a ``cond`` per chunk: on a CPU the streams run one at a time,
+    so it stays a branch): a buffer of capacity 2,048 holding 400 events
+    packed to the front costs one chunk, not four.
 
     The votes go ``chunk`` at a time (a ``lax.scan``), so that the cell indices
     and weights of a chunk (``chunk * n_theta`` of each) stay in the CPU's L2
@@ -131,6 +135,8 @@ def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576, merge: boo
             pixel = jnp.zeros((n + 1,), pixel.dtype).at[slot].set(pixel, mode="promise_in_bounds")[:n]
             w = jnp.zeros((n + 1,), jnp.int32).at[slot].set(total, mode="promise_in_bounds")[:n]
             votes = rank[-1]
+        else:
+            votes = jnp.max(jnp.where(ok, jnp.arange(1, n + 1, dtype=jnp.int32), 0))
         n_chunks = -(-n // chunk)
         length = -(-n // n_chunks)
         pad = n_chunks * length - n  # padding events have weight 0
@@ -143,15 +149,11 @@ def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576, merge: boo
             return acc.at[cells.reshape(-1)].add(jnp.repeat(w, grid.n_theta), mode="promise_in_bounds")
 
         def maybe_add(acc, part):
-            if not merge:
-                return add(acc, part), None
             start, pixel, w = part
             return jax.lax.cond(start < votes, add, lambda acc, _: acc, acc, (pixel, w)), None
 
         starts = jnp.arange(n_chunks, dtype=jnp.int32) * length
-        acc, _ = jax.lax.scan(
-            maybe_add, jnp.zeros((grid.size + 1,), jnp.int32), (starts, pixel, w) if merge else (pixel, w)
-        )
+        acc, _ = jax.lax.scan(maybe_add, jnp.zeros((grid.size + 1,), jnp.int32), (starts, pixel, w))
         return acc[: grid.size].reshape(grid.shape).astype(jnp.float32)
 
     return _one_stream_at_a_time(accumulate)
@@ -191,15 +193,25 @@ def _ring_kernels(grid: CircleGrid) -> tuple[np.ndarray, int, int]:
     return kernels, ny, nx
 
 
+@functools.cache
+def _ring_spectra(grid: CircleGrid) -> np.ndarray:
+    """The ring kernels' real FFTs, complex64, computed once on the host (a constant of the program)."""
+    kernels, ny, nx = _ring_kernels(grid)
+    return np.fft.rfft2(kernels, s=(ny, nx)).astype(np.complex64)
+
+
+def circle_image_votes(grid: CircleGrid, image: jax.Array) -> jax.Array:
+    """`spikejax.vision.hough.circle_image_votes`: the image convolved with each ring by FFT."""
+    _, ny, nx = _ring_kernels(grid)
+    spectrum = jnp.fft.rfft2(image, s=(ny, nx))
+    out = jnp.fft.irfft2(_ring_spectra(grid) * spectrum[None], s=(ny, nx))
+    return jnp.round(out[:, : grid.height, : grid.width])
+
+
 def circle_votes(grid: CircleGrid, events: Events, *, signed: bool = True, method: str = "fft") -> jax.Array:
     """`spikejax.vision.hough.circle_votes`: by FFT (`_ring_kernels`) or by a scatter of the ring cells."""
     if method == "fft":
-        kernels, ny, nx = _ring_kernels(grid)
-        image = event_image(grid, events, signed=signed)
-        spectrum = jnp.fft.rfft2(image, s=(ny, nx))
-        rings = jnp.fft.rfft2(jnp.asarray(kernels))
-        out = jnp.fft.irfft2(rings * spectrum[None], s=(ny, nx))
-        return jnp.round(out[:, : grid.height, : grid.width])
+        return circle_image_votes(grid, event_image(grid, events, signed=signed))
     if method == "scatter":
         offsets = jnp.asarray(ring_offsets(grid))
         pixel, ok = _pixel(grid, events)
@@ -247,8 +259,13 @@ def _neighbourhood(fired: jax.Array) -> jax.Array:
 
 def sync_step(params: HoughParams, grid: Grid, state: HoughState, events: Events, t) -> tuple[HoughState, jax.Array]:
     """`spikejax.vision.hough.neuron.sync_step` with the fast `votes` and `_neighbourhood`."""
+    return sync_update(params, state, votes(grid, events), t)
+
+
+def sync_update(params: HoughParams, state: HoughState, slot_votes: jax.Array, t) -> tuple[HoughState, jax.Array]:
+    """`sync_step` given the slot's accumulator ``slot_votes`` (the grid's shape) instead of its events."""
     t = jnp.asarray(t, jnp.float32)
-    v = decay(state.v, params.decay * (t - state.t)) + votes(grid, events)
+    v = decay(state.v, params.decay * (t - state.t)) + slot_votes
     fired = jnp.abs(v) >= params.v_th
     spikes = jnp.where(fired, jnp.sign(v), 0.0).astype(jnp.int8)
     v = jnp.where(_neighbourhood(fired), 0.0, v)
