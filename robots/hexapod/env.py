@@ -99,7 +99,7 @@ from mujoco import rollout as mj_rollout
 from robots.hexapod import camera as cam
 from robots.hexapod import decisions, physics
 from robots.hexapod import prey as prey_mod
-from robots.hexapod.cpg import CPGWeights, cpg_init, cpg_step
+from robots.hexapod.cpg import CPGState, CPGWeights, cpg_init, cpg_step
 from robots.hexapod.gaits import N_GAITS, N_LEGS, PERIOD
 from robots.hexapod.legs import servo_targets, step_params
 from robots.hexapod.training import TrainParams, gait_correct, train
@@ -109,7 +109,16 @@ from spikejax.errors import UserError
 from spikejax.neurons import DiscreteLIFParams
 from spikejax.vision import edges
 
-__all__ = ["BACKENDS", "CAPTURE_MARGIN", "LOST_BEARING", "STEP_S", "HexapodEnv", "trained_network", "world_track"]
+__all__ = [
+    "BACKENDS",
+    "CAPTURE_MARGIN",
+    "LOST_BEARING",
+    "STEP_S",
+    "HexapodEnv",
+    "cpg_cycle",
+    "trained_network",
+    "world_track",
+]
 
 BACKENDS = ("mujoco",)
 CAPTURE_MARGIN = 0.2  # m beyond the near boundary
@@ -146,6 +155,21 @@ def world_track(track: jax.Array, start: jax.Array) -> jax.Array:
     x = start[0] + c * track[..., 0] - s * track[..., 1]
     y = start[1] + s * track[..., 0] + c * track[..., 1]
     return jnp.stack([x, y, track[..., 2], track[..., 3], track[..., 4], track[..., 5] + start[2]], axis=-1)
+
+
+def cpg_cycle(
+    neuron: DiscreteLIFParams, weights: CPGWeights, state: CPGState, previous: jax.Array, gait: jax.Array
+) -> tuple[CPGState, jax.Array]:
+    """One decision's CPG: `PERIOD` steps with ``gait``'s neuron on, from rest if ``gait != previous``.
+
+    The reset at a gait change is `robots.hexapod.switching`'s finding: carried
+    over, 11-73 % of converged networks reach the new pattern within a cycle;
+    reset, 100 %. Returns the new state and the raster ``(PERIOD, 6)``.
+    """
+    changed = jnp.asarray(gait) != jnp.asarray(previous)
+    state = jax.tree.map(lambda rest, s: jnp.where(changed, rest, s), cpg_init(), state)
+    drive = jax.nn.one_hot(gait, N_GAITS, dtype=jnp.float32)
+    return jax.lax.scan(lambda s, _: cpg_step(neuron, weights, s, drive), state, None, length=PERIOD)
 
 
 class _Runner:
@@ -302,11 +326,7 @@ class HexapodEnv(Env):
         info = state.info
         gait = jnp.clip(jnp.round(jnp.reshape(jnp.asarray(action, jnp.float32), (-1,))[0]), 0, N_GAITS - 1)
         gait = gait.astype(jnp.int32)
-        changed = gait != info["gait"]
-        # A gait change resets the CPG to rest (robots.hexapod.switching: 100 % of switches reach the new pattern).
-        cpg = jax.tree.map(lambda rest, s: jnp.where(changed, rest, s), cpg_init(), info["cpg"])
-        drive = jax.nn.one_hot(gait, N_GAITS, dtype=jnp.float32)
-        cpg, rows = jax.lax.scan(lambda s, _: cpg_step(self.neuron, self.weights, s, drive), cpg, None, length=PERIOD)
+        cpg, rows = cpg_cycle(self.neuron, self.weights, info["cpg"], info["gait"], gait)
         k = info["steps"]
         raster = jax.lax.dynamic_update_slice(info["raster"], rows, (PERIOD * k, 0))
         t = (k * self.substeps + jnp.arange(self.substeps)).astype(jnp.float32) * self.dt

@@ -44,12 +44,15 @@ Files in ``--out DIR``:
 
 **Fig. 8, our reading.** The paper gives no distances. In our units (G1 walks
 0.09 m a cycle, a turn 15 deg, the near boundary 0.45 m from the camera for a
-0.10 m cube): object 1 ahead and to the right, 0.71 m from the camera at
--16 deg, so three forward steps bring it into the near rows on the right
-(F F F) and turns align it (R R); object 2 further right (at -34 deg, outside
-the 60 deg view at the start), which after object 1's removal is near on the
-right two forward steps later (F F R); object 4 beyond it, farther, in view;
-object 3 far on the left. Energy spike counts: ``cpg`` is the 6 CPG neurons'
+0.10 m cube), the torso's centre at the origin facing +x: object 1 at
+(0.69, -0.19) m, ahead and to the right, 0.62 m from the camera at -18 deg, so
+three forward steps bring it into the near rows on the right (F F F) and
+turns align it (R R); object 2 at (0.83, -0.38), 0.82 m at -28 deg (the edge
+of the 60 deg view), which after object 1's removal is near on the right two
+forward steps later (F F R); object 4 at (1.58, -0.49), beyond it and farther;
+object 3 at (1.20, 0.60), far on the left. The oracle walks this layout
+``F F F R R | F F R`` on some robots and ``F F F R R | F F R R`` on others. The
+comparison stops at the second capture, as the paper's figure does. Energy spike counts: ``cpg`` is the 6 CPG neurons'
 spikes, ``drive`` the chosen gait-selection neuron's tonic spikes (one a CPG
 step, two a decision: the paper's "7 neurons spike" a step is 6 + 1), ``dvs``
 the DVS events into the filter (charged separately: events are not spikes of
@@ -84,10 +87,12 @@ __all__ = [
     "FIG8_SCENE",
     "PAPER_FIG8",
     "LAYERS",
+    "episode_keys",
     "run_episodes",
     "summarize",
     "energy_rows",
     "edit_distance",
+    "fig8_gaits",
     "gait_string",
     "run",
     "command",
@@ -123,7 +128,7 @@ _BATCH = 64
 
 
 def _fig8() -> prey_mod.PreyScene:
-    xy = np.array([[0.78, -0.19], [0.81, -0.49], [1.20, 0.60], [1.58, -0.49]], np.float32)
+    xy = np.array([[0.69, -0.19], [0.83, -0.38], [1.20, 0.60], [1.58, -0.49]], np.float32)
     return prey_mod.PreyScene(
         jnp.zeros(3, jnp.float32), jnp.asarray(xy), jnp.full((4,), 0.1, jnp.float32), jnp.ones((4,), bool)
     )
@@ -133,7 +138,8 @@ FIG8_SCENE = _fig8()
 """The Fig. 8 layout as we read it (module docstring): objects 1-4 in slots 0-3, the robot at the origin facing +x."""
 
 
-def _episode_keys(seed: int, n: int) -> jax.Array:
+def episode_keys(seed: int, n: int) -> jax.Array:
+    """Episode ``i``'s key, ``fold_in(key(seed), i)``, for ``i < n``: the same episode for every controller."""
     return jax.vmap(lambda i: jax.random.fold_in(jax.random.key(seed), i))(jnp.arange(n))
 
 
@@ -318,7 +324,7 @@ def energy_rows(totals: dict[str, float], steps: int, captures: int) -> list[lis
         raise UserError("energy_rows needs at least one step")
     energy = spike_energy(totals)
     rows = []
-    per_cap = lambda x: round(x / captures, 12) if captures else ""  # noqa: E731
+    per_cap = lambda x: x / captures if captures else ""  # noqa: E731
     for layer in LAYERS:
         rows.append(
             [
@@ -350,6 +356,13 @@ def gait_string(gaits, steps: int, captures=None) -> str:
         if k + 1 in marks and k + 1 < steps:
             text += "|"
     return text
+
+
+def fig8_gaits(gaits, steps: int, captures) -> str:
+    """`gait_string` up to the second capture (the paper's Fig. 8 ends there), or the whole episode."""
+    caught = np.sort(np.asarray(captures)[np.asarray(captures) >= 0])
+    end = int(caught[1]) if caught.size >= 2 else int(steps)
+    return gait_string(gaits, end, captures)
 
 
 def edit_distance(a: str, b: str) -> int:
@@ -463,7 +476,6 @@ def run(
             False: HexapodEnv(seconds=seconds, robot_seed=seed, see=False),
         }
         few = max(1, episodes // 10)
-        batch = min(_BATCH, episodes)
         if fixed is not None:
             conditions = {"scene": (episodes, lambda keys: _tile(fixed, keys.shape[0]))}
         else:
@@ -473,13 +485,19 @@ def run(
             conditions["fig8"] = (few, lambda keys: _tile(FIG8_SCENE, keys.shape[0]))
         rows, results = [], {}
         for c, (name_c, (n, make)) in enumerate(conditions.items()):
-            keys = _episode_keys(seed + 1000 * c, n)
+            keys = episode_keys(seed + 1000 * c, n)
             scenes = make(keys)
             results[name_c] = {}
             for name, controller in controllers.CONTROLLERS.items():
                 env = envs[name == "snn"]
                 res = run_episodes(
-                    env, controller, scenes, keys, batch=batch, progress=not no_progress, desc=f"{name_c} {name}"
+                    env,
+                    controller,
+                    scenes,
+                    keys,
+                    batch=min(_BATCH, n),
+                    progress=not no_progress,
+                    desc=f"{name_c} {name}",
                 )
                 res["alive0"] = np.asarray(scenes.alive)
                 rows.append(summarize(name_c, name, res))
@@ -493,7 +511,7 @@ def run(
         fig8 = None
         if "fig8" in results:
             r8 = results["fig8"]["snn"][0]
-            ours = gait_string(r8["gait"][0], r8["steps"][0], r8["captures"][0])
+            ours = fig8_gaits(r8["gait"][0], r8["steps"][0], r8["captures"][0])
             fig8 = {"res": r8, "ours": ours, "distance": edit_distance(ours, PAPER_FIG8)}
         _plot_trajectories(out / "hexapod_prey_trajectories.png", results, fig8)
         raster_res = results["fig8" if fig8 else energy_cond]["snn"][0]
