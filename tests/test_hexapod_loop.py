@@ -49,8 +49,9 @@ def test_reset_and_step_shapes_and_a_batch_of_two_is_each_alone(blind_env):
         one = jax.tree.map(lambda a: a[i : i + 1], reset(keys[i : i + 1], jax.tree.map(lambda a: a[i : i + 1], scenes)))
         one = step(step(one, actions[i : i + 1]), actions[i : i + 1])
         for field in ("phys", "torso", "cpg_spikes", "distance"):
-            np.testing.assert_array_equal(
-                np.asarray(one.info[field][0]), np.asarray(batch.info[field][i]), err_msg=field
+            # A batch of 2 and a lone run differ by float32 rounding (about 1e-6 here), as the snake's do.
+            np.testing.assert_allclose(
+                np.asarray(one.info[field][0]), np.asarray(batch.info[field][i]), rtol=1e-5, atol=1e-5, err_msg=field
             )
     # Two G1 cycles walk forward (about 0.09 m a cycle); two G3 cycles turn right.
     x0 = float(env.torso0[int(batch.info["robot"][0])][0])
@@ -83,11 +84,9 @@ def test_a_gait_change_resets_the_cpg_to_rest_and_a_kept_gait_does_not(blind_env
     np.testing.assert_array_equal(state.info["cpg_spikes"], PATTERNS[0])  # G1 from rest: {N2,N4,N6} -> {N1,N3,N5}
     state = step(state, jnp.int32(1))  # to G2: reset, so G2's pattern from rest at once
     np.testing.assert_array_equal(state.info["cpg_spikes"], PATTERNS[1])  # {N4,N6} -> {N5}
-    v_before = np.asarray(state.info["cpg"].neurons.v)
     state = step(state, jnp.int32(1))  # kept: the state carries on, and the pattern repeats
     np.testing.assert_array_equal(state.info["cpg_spikes"], PATTERNS[1])
     assert np.asarray(state.info["raster"])[:6].sum() == 6 + 3 + 3
-    assert v_before.shape == (6,)
 
 
 def test_controllers_are_pure_pairs():
