@@ -39,8 +39,11 @@ Files in ``--out DIR``:
   2.55 mJ a step, which the paper calls "sub-mJ": it is 2.55 times a mJ);
 - ``hexapod_prey_trajectories.png``: the torso's path of many episodes over the
   arena per controller, and the Fig. 8 layout with the SNN's gaits per step;
+- ``hexapod_fig8.csv``: per controller and Fig. 8 episode, the gaits up to the
+  second capture and their edit distance to the paper's;
 - ``hexapod_prey_raster.png``: the CPG neurons, the gait drive and the visual
-  gait neurons' counts over the first Fig. 8 SNN episode.
+  gait neurons' counts over the first Fig. 8 episode of the SNN and of the
+  oracle.
 
 **Fig. 8, our reading.** The paper gives no distances. In our units (G1 walks
 0.09 m a cycle, a turn 15 deg, the near boundary 0.45 m from the camera for a
@@ -426,26 +429,33 @@ def _plot_trajectories(path: Path, results: dict, fig8: dict | None, n_show: int
     fig.savefig(path, dpi=120)
 
 
-def _plot_raster(path: Path, res: dict, i: int = 0) -> None:
-    s = int(res["steps"][i])
-    cpg = np.asarray(res["cpg"][i, :s]).reshape(s * PERIOD, N_LEGS)
-    gait = np.repeat(np.asarray(res["gait"][i, :s]), PERIOD)
-    fig = Figure(figsize=(max(6, 0.18 * s * PERIOD + 2), 5))
-    ax1, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [9, 3]})
-    t = np.arange(s * PERIOD)
-    for j in range(N_LEGS):
-        ax1.eventplot(t[cpg[:, j] > 0] * STEP_S / PERIOD, lineoffsets=j, linelengths=0.7, color="k")
-    for g in range(3):
-        ax1.eventplot(t[gait == g] * STEP_S / PERIOD, lineoffsets=N_LEGS + g, linelengths=0.7, color=f"C{g}")
-    ax1.set_yticks(range(N_LEGS + 3), [f"N{j + 1}" for j in range(N_LEGS)] + ["G1 drive", "G2 drive", "G3 drive"])
-    ax1.set_title("CPG neurons and the tonic gait drive (reset to rest at each gait change)", fontsize=9)
-    counts = np.asarray(res["counts"][i, :s]).T
-    ax2.imshow(counts, aspect="auto", cmap="viridis", extent=(0, s * STEP_S, 2.5, -0.5), interpolation="nearest")
-    ax2.set_yticks(range(3), ["G1", "G2", "G3"])
-    ax2.set_title("visual gait neurons: spikes per step (the winner-take-all's input)", fontsize=9)
-    ax2.set_xlabel("time (s)")
+def _plot_raster(path: Path, episodes: list[tuple[str, dict]]) -> None:
+    fig = Figure(figsize=(10, 5 * len(episodes)))
+    axes = fig.subplots(2 * len(episodes), 1, gridspec_kw={"height_ratios": [9, 3] * len(episodes)})
+    for e, (title, res) in enumerate(episodes):
+        ax1, ax2 = axes[2 * e], axes[2 * e + 1]
+        s = int(res["steps"][0])
+        cpg = np.asarray(res["cpg"][0, :s]).reshape(s * PERIOD, N_LEGS)
+        gait = np.repeat(np.asarray(res["gait"][0, :s]), PERIOD)
+        t = np.arange(s * PERIOD) * STEP_S / PERIOD
+        for j in range(N_LEGS):
+            ax1.eventplot(t[cpg[:, j] > 0], lineoffsets=j, linelengths=0.7, color="k")
+        for g in range(3):
+            ax1.eventplot(t[gait == g], lineoffsets=N_LEGS + g, linelengths=0.7, color=f"C{g}")
+        ax1.set_yticks(range(N_LEGS + 3), [f"N{j + 1}" for j in range(N_LEGS)] + ["G1 drive", "G2 drive", "G3 drive"])
+        ax1.set_xlim(0, s * STEP_S)
+        ax1.set_title(f"{title}: CPG neurons and the tonic gait drive (the CPG reset at each change)", fontsize=9)
+        counts = np.asarray(res["counts"][0, :s]).T
+        im = ax2.imshow(
+            counts, aspect="auto", cmap="viridis", extent=(0, s * STEP_S, 2.5, -0.5), interpolation="nearest"
+        )
+        fig.colorbar(im, ax=ax2, pad=0.01, label="spikes")
+        ax2.set_yticks(range(3), ["G1", "G2", "G3"])
+        blind = " (not computed: this controller runs without the camera)" if not counts.any() else ""
+        ax2.set_title(f"visual gait neurons: spikes per step (the winner-take-all's input){blind}", fontsize=9)
+        ax2.set_xlabel("time (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
 
 
 def run(
@@ -514,8 +524,19 @@ def run(
             ours = fig8_gaits(r8["gait"][0], r8["steps"][0], r8["captures"][0])
             fig8 = {"res": r8, "ours": ours, "distance": edit_distance(ours, PAPER_FIG8)}
         _plot_trajectories(out / "hexapod_prey_trajectories.png", results, fig8)
-        raster_res = results["fig8" if fig8 else energy_cond]["snn"][0]
-        _plot_raster(out / "hexapod_prey_raster.png", raster_res)
+        raster_cond = "fig8" if fig8 else energy_cond
+        _plot_raster(
+            out / "hexapod_prey_raster.png",
+            [(f"{raster_cond}, {c}", results[raster_cond][c][0]) for c in ("snn", "oracle")],
+        )
+        if fig8 is not None:
+            fig8_rows = []
+            for name in controllers.CONTROLLERS:
+                r8 = results["fig8"][name][0]
+                for i in range(r8["steps"].shape[0]):
+                    g = fig8_gaits(r8["gait"][i], r8["steps"][i], r8["captures"][i])
+                    fig8_rows.append([name, i, g, PAPER_FIG8, edit_distance(g, PAPER_FIG8)])
+            write_csv(out / "hexapod_fig8.csv", ["controller", "episode", "gaits", "paper", "edit_distance"], fig8_rows)
         print(f"{'condition':<10}{'controller':<8} captured [95% CI]        nearest first        time to capture (s)")
         for r in rows:
             print(
@@ -527,7 +548,10 @@ def run(
         paper = spike_energy(PAPER_HEXAPOD)["total"]
         print(f"paper: 1.5e6 x 1.7 nJ + 7 x 1.7 nJ = {paper * 1e3:.5f} mJ a step, which it calls 'sub-mJ' (> 1 mJ)")
         if fig8 is not None:
-            print(f"Fig. 8 gaits: ours {fig8['ours']}, paper {PAPER_FIG8}, edit distance {fig8['distance']}")
+            for name in controllers.CONTROLLERS:
+                r8 = results["fig8"][name][0]
+                g = fig8_gaits(r8["gait"][0], r8["steps"][0], r8["captures"][0])
+                print(f"Fig. 8 gaits, {name}: {g} (paper {PAPER_FIG8}, edit distance {edit_distance(g, PAPER_FIG8)})")
         print(f"wrote {out / 'hexapod_prey.csv'}, {out / 'hexapod_energy.csv'} and two figures")
         return 0
 
