@@ -46,7 +46,7 @@ def test_reset_and_step_shapes_and_a_batch_of_two_is_each_alone(blind_env):
     batch = step(step(batch, actions), actions)
     assert batch.info["torso"].shape == (2, 6) and batch.info["cpg_spikes"].shape == (2, 2, 6)
     for i in range(2):
-        one = jax.tree.map(lambda a: a[i : i + 1], reset(keys[i : i + 1], jax.tree.map(lambda a: a[i : i + 1], scenes)))
+        one = reset(keys[i : i + 1], jax.tree.map(lambda a: a[i : i + 1], scenes))
         one = step(step(one, actions[i : i + 1]), actions[i : i + 1])
         for field in ("phys", "torso", "cpg_spikes", "distance"):
             # A batch of 2 and a lone run differ by float32 rounding (about 1e-6 here), as the snake's do.

@@ -11,6 +11,10 @@ batches them with the env.
   winner-take-all of the visual SNN's gait neurons over the last step's events
   (``info["wta"]``; ties and silence keep the gait in force, so the robot
   starts forward, "the robot starts moving forward").
+* `snn_ordered`: the same over the ordered readout's counts
+  (``info["wta_ordered"]``), where the frame's layer-3 spikes reach the gait
+  neurons one at a time, so a gait neuron may fire more than once a frame
+  (not in ``CONTROLLERS``: a variant, measured in ``docs/BENCHMARKS.md``).
 * `oracle`: `robots.hexapod.prey.truth_gait` from the camera's true pose
   (``info["truth_gait"]``): the rule the SNN approximates, fed the truth; the
   upper bound of this task's rule.
@@ -25,7 +29,7 @@ import jax.numpy as jnp
 
 from robots.hexapod.gaits import N_GAITS
 
-__all__ = ["CONTROLLERS", "snn", "oracle", "random"]
+__all__ = ["CONTROLLERS", "snn", "snn_ordered", "oracle", "random"]
 
 
 def _keep_key(key):
@@ -34,6 +38,10 @@ def _keep_key(key):
 
 def _snn_act(cstate, state):
     return cstate, state.info["wta"].astype(jnp.int32)
+
+
+def _snn_ordered_act(cstate, state):
+    return cstate, state.info["wta_ordered"].astype(jnp.int32)
 
 
 def _oracle_act(cstate, state):
@@ -47,6 +55,9 @@ def _random_act(cstate, state):
 
 snn = (_keep_key, _snn_act)
 """The visual SNN's winner-take-all: the paper's closed loop."""
+
+snn_ordered = (_keep_key, _snn_ordered_act)
+"""The same winner-take-all over the ordered readout's counts (`robots.hexapod.decisions.ordered_readout`)."""
 
 oracle = (_keep_key, _oracle_act)
 """The ground-truth rule from the true pose (upper bound)."""

@@ -32,7 +32,10 @@ Spaces:
   and the gait in force, one-hot; zeros and G1 after ``reset``.
 * ``info``: ``gait_counts`` ``(3,)`` and ``wta`` (`spikejax.vision.edges.winner`
   over them, ties and silence keeping the gait in force: the paper's
-  rate-coded winner-take-all); ``events``, ``filter``, ``layer2``, ``layer3``
+  rate-coded winner-take-all); ``gait_counts_ordered`` and ``wta_ordered``, the
+  same with the frame's layer-3 spikes reaching the gait neurons one at a time
+  (`robots.hexapod.decisions.ordered_readout`, no ceiling of one spike a
+  frame); ``events``, ``filter``, ``layer2``, ``layer3``
   (spike totals of the step's layers; ``events`` the DVS events into the
   filter), ``overflow`` (events that did not fit); ``cpg_spikes`` ``(2, 6)``
   (this step's CPG raster); ``torso`` ``(6,)`` the torso's world state
@@ -299,6 +302,8 @@ class HexapodEnv(Env):
             "gait": gait,
             "gait_counts": zeros3,
             "wta": gait,
+            "gait_counts_ordered": zeros3,
+            "wta_ordered": gait,
             "events": zero,
             "filter": zero,
             "layer2": zero,
@@ -340,6 +345,7 @@ class HexapodEnv(Env):
             track = jnp.concatenate([info["track"][None], frames], axis=0)
             d = decisions.decide(track, scene, k_see)
             counts = d.out_counts.astype(jnp.int32)
+            ordered = d.ordered_counts.astype(jnp.int32)
             seen = {
                 "events": d.events,
                 "filter": d.filter_spikes,
@@ -348,7 +354,7 @@ class HexapodEnv(Env):
                 "overflow": d.overflow,
             }
         else:
-            counts = jnp.zeros((N_GAITS,), jnp.int32)
+            counts = ordered = jnp.zeros((N_GAITS,), jnp.int32)
             seen = {f: jnp.zeros((), jnp.int32) for f in ("events", "filter", "layer2", "layer3", "overflow")}
         torso = world_track(frames[-1], scene.start)
         pose = cam.ground_pose(torso)
@@ -376,6 +382,8 @@ class HexapodEnv(Env):
             "gait": gait,
             "gait_counts": counts,
             "wta": edges.winner(counts, gait),
+            "gait_counts_ordered": ordered,
+            "wta_ordered": edges.winner(ordered, gait),
             **seen,
             "scene": scene,
             "captures": captures,
