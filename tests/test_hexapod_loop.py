@@ -90,10 +90,9 @@ def test_a_gait_change_resets_the_cpg_to_rest_and_a_kept_gait_does_not(blind_env
 
 
 def test_controllers_are_pure_pairs():
-    state = SimpleNamespace(info={"wta": jnp.int32(2), "truth_gait": jnp.int32(1)})
+    state = SimpleNamespace(info={"wta": jnp.int32(2), "wta_ordered": jnp.int32(0), "truth_gait": jnp.int32(1)})
     key = jax.random.key(0)
-    for name, want in (("snn", 2), ("oracle", 1)):
-        init, act = controllers.CONTROLLERS[name]
+    for (init, act), want in ((controllers.snn, 2), (controllers.snn_ordered, 0), (controllers.oracle, 1)):
         assert int(act(init(key), state)[1]) == want
     init, act = controllers.random
     c = init(key)
