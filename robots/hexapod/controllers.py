@@ -1,0 +1,68 @@
+"""Controllers of the hexapod's predator-prey loop: the paper's visual SNN, an oracle and a random-gait baseline.
+
+Each is an ``(init, act)`` pair of pure functions, like
+`robots.snake.pipe_controller`: ``init(key) -> cstate`` and
+``act(cstate, state) -> (cstate, action)``, called before every step of
+`robots.hexapod.env.HexapodEnv` on the env's last `brax.envs.base.State`; the
+action is the gait (int32: 0 G1 forward, 1 G2 left, 2 G3 right). ``jax.vmap``
+batches them with the env.
+
+* `snn`: the hexapod SCPG paper's loop (Sec. IV-C, V): the rate-coded
+  winner-take-all of the visual SNN's gait neurons over the last step's events
+  (``info["wta"]``; ties and silence keep the gait in force, so the robot
+  starts forward, "the robot starts moving forward").
+* `snn_ordered`: the same over the ordered readout's counts
+  (``info["wta_ordered"]``), where the frame's layer-3 spikes reach the gait
+  neurons one at a time, so a gait neuron may fire more than once a frame
+  (not in ``CONTROLLERS``: a variant, measured in ``docs/BENCHMARKS.md``).
+* `oracle`: `robots.hexapod.prey.truth_gait` from the camera's true pose
+  (``info["truth_gait"]``): the rule the SNN approximates, fed the truth; the
+  upper bound of this task's rule.
+* `random`: a gait drawn uniformly at each decision from the controller's own
+  key: the lower bound.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from robots.hexapod.gaits import N_GAITS
+
+__all__ = ["CONTROLLERS", "snn", "snn_ordered", "oracle", "random"]
+
+
+def _keep_key(key):
+    return key
+
+
+def _snn_act(cstate, state):
+    return cstate, state.info["wta"].astype(jnp.int32)
+
+
+def _snn_ordered_act(cstate, state):
+    return cstate, state.info["wta_ordered"].astype(jnp.int32)
+
+
+def _oracle_act(cstate, state):
+    return cstate, state.info["truth_gait"].astype(jnp.int32)
+
+
+def _random_act(cstate, state):
+    key, sub = jax.random.split(cstate)
+    return key, jax.random.randint(sub, (), 0, N_GAITS, dtype=jnp.int32)
+
+
+snn = (_keep_key, _snn_act)
+"""The visual SNN's winner-take-all: the paper's closed loop."""
+
+snn_ordered = (_keep_key, _snn_ordered_act)
+"""The same winner-take-all over the ordered readout's counts (`robots.hexapod.decisions.ordered_readout`)."""
+
+oracle = (_keep_key, _oracle_act)
+"""The ground-truth rule from the true pose (upper bound)."""
+
+random = (_keep_key, _random_act)
+"""A uniformly random gait at each decision, keyed (lower bound)."""
+
+CONTROLLERS = {"snn": snn, "oracle": oracle, "random": random}
