@@ -23,6 +23,7 @@ def test_gaits_notebook_executes(tmp_path, monkeypatch):
     assert (tmp_path / "gaits" / "gait_convergence.csv").exists()
 
 
+@pytest.mark.slow  # 22-31 s: the fast suite is at its 15-minute limit
 def test_robobee_notebook_executes(monkeypatch):
     monkeypatch.setenv("SPIKEJAX_NB_FLIGHTS", "4")
     nb = nbformat.read(NOTEBOOKS / "robobee.ipynb", as_version=4)
@@ -36,6 +37,7 @@ def test_robobee_notebook_executes(monkeypatch):
     assert "of 4 randomised robots reached both waypoints" in text
 
 
+@pytest.mark.slow  # 22-31 s: the fast suite is at its 15-minute limit
 def test_snake_rstdp_notebook_executes(monkeypatch):
     monkeypatch.setenv("SPIKEJAX_NB_SEEDS", "2")
     monkeypatch.setenv("SPIKEJAX_NB_STEPS", "100")

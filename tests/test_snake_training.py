@@ -51,6 +51,7 @@ def test_frozen_networks_do_not_change_and_the_trace_covers_every_step():
     np.testing.assert_array_equal(trace.a_head, again.a_head)  # deterministic given the seeds
 
 
+@pytest.mark.slow  # 41 s: the fast suite is at its 15-minute limit
 def test_a_short_training_follows_turns_that_untrained_networks_lose():
     """100 s of training on a zigzag, then frozen on a left-right and a right-left turn, beside the untrained nets.
 
