@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from robots.snake import pipe_modes
+from robots.snake import reproduce_pipe_modes as pipe_modes
 from spikejax.errors import UserError
 
 
