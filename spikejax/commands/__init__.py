@@ -90,26 +90,24 @@ def run_parameters(command: Command) -> set[str]:
     }
 
 
-def count(text: str) -> int:
-    """``argparse`` type of a count that must be at least 1 (``--trials``, ``--cpu-devices``)."""
+def _whole_number(text: str, minimum: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
     return value
+
+
+def count(text: str) -> int:
+    """``argparse`` type of a count that must be at least 1 (``--trials``, ``--cpu-devices``)."""
+    return _whole_number(text, 1)
 
 
 def count_or_zero(text: str) -> int:
     """``argparse`` type of a count that may be 0 (an optional extra study: ``--empty 0`` skips it)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be at least 0, got {value}")
-    return value
+    return _whole_number(text, 0)
 
 
 def positive_float(text: str) -> float:
