@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from robots.common import write_csv
-from spikejax.commands import Command, add_common, output_directory
+from spikejax.commands import Command, add_common, count, output_directory
 from spikejax.errors import UserError
 
 # robots.snake.pipes and the env (MuJoCo) are imported by the functions that run the snake:
@@ -99,20 +99,23 @@ def _pad(a: np.ndarray, steps: int, edge: bool) -> np.ndarray:
 
 
 @functools.cache
-def _programs(env):
+def _programs(env, devices: int = 1):
     """The jitted episode start and `SEGMENT` of slots of ``env`` under `robots.snake.pipe_controller.switch`.
 
-    One pair per env serves every controller (the switch is traced), situation of its kind and chunk.
+    One pair per env serves every controller (the switch is traced), situation of its kind and chunk; the
+    batch is split over the first ``devices`` CPU devices (`spikejax.devices.shard_batch`).
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env
+    from spikejax.devices import shard_batch
 
-    start = jax.jit(jax.vmap(lambda k, s: pipe_env.rollout_start(env, pc.switch, k, s)))
-    segment = jax.jit(jax.vmap(lambda c, p: pipe_env.rollout_slots(env, pc.switch, p, c, SEGMENT)))
+    on = jax.devices()[:devices]
+    start = shard_batch(jax.vmap(lambda k, s: pipe_env.rollout_start(env, pc.switch, k, s)), on)
+    segment = shard_batch(jax.vmap(lambda c, p: pipe_env.rollout_slots(env, pc.switch, p, c, SEGMENT)), on)
     return start, segment
 
 
-def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size: int = CHUNK):
+def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size: int = CHUNK, devices: int = 1):
     """Each episode of ``keys`` / ``scenes`` for ``slots`` slots, ``CHUNK`` at a time, with `robots.snake.pipe_controller.switch`.
 
     Chunks of ``size`` episodes (the last padded with repeats), so that
@@ -124,7 +127,7 @@ def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size:
     """
     from tqdm import tqdm
 
-    start, segment = _programs(env)
+    start, segment = _programs(env, devices)
     zero_pad = ("detected", "in_view")
     keep = ("detected", "d_est", "depth", "offset_est", "offset_true", "in_view", "success", "reached")
     steps = slots * env.slot_steps
@@ -241,7 +244,7 @@ def _switch_params(machine, controller: str, n: int):
     return jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (n,)), params)
 
 
-def _conditions(name, env, scenes, keys, slots, machine, baselines: int, progress: bool):
+def _conditions(name, env, scenes, keys, slots, machine, baselines: int, progress: bool, devices: int = 1):
     """The spiking controller on every episode, the baselines on the first ``baselines``: ``[(label, res, scenes)]``."""
     out = []
     for controller in ("bang-bang", "straight", "privileged"):
@@ -251,7 +254,7 @@ def _conditions(name, env, scenes, keys, slots, machine, baselines: int, progres
         sub = jax.tree.map(lambda a: a[:n], scenes)
         params = _switch_params(machine, controller, n)
         size = min(CIRCLE_CHUNK if env.tracker.detector.circle is not None else CHUNK, keys.shape[0])
-        res = _episodes(env, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size)
+        res = _episodes(env, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size, devices)
         out.append((controller, res, sub))
     return out
 
@@ -264,8 +267,9 @@ def run(
     progress: bool = True,
     baselines: int = 64,
     situations: list[str] | None = None,
+    devices: int = 1,
 ) -> list[list]:
-    """Everything in the module docstring."""
+    """Everything in the module docstring; each batch split over the first ``devices`` CPU devices."""
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
 
@@ -317,7 +321,7 @@ def run(
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
         machine = pc.machine_params(lying)
-        for controller, res, sub in _conditions(name, env, scenes, keys, slots, machine, baselines, progress):
+        for controller, res, sub in _conditions(name, env, scenes, keys, slots, machine, baselines, progress, devices):
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, int(machine.lost_slots)))
             if controller == "bang-bang":
                 results.append((name, res, sub))
@@ -345,6 +349,12 @@ def _add_arguments(parser) -> None:
         help="episodes (the first of each situation) also run going straight and with the privileged controller "
         "(default 64)",
     )
+    parser.add_argument(
+        "--cpu-devices",
+        type=count,
+        default=None,
+        help="CPU devices each batch of episodes is split over (default: one per core)",
+    )
 
 
 def reproduce_command_run(
@@ -355,11 +365,24 @@ def reproduce_command_run(
     scene=None,
     baselines: int = 64,
     situations: list[str] | None = None,
+    cpu_devices: int | None = None,
     no_progress: bool = False,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
+    from spikejax.devices import cpu_devices_for_run
+
     with output_directory(out, command="reproduce snake-pipe") as out:
-        rows = run(out, episodes, seconds, scene, progress=not no_progress, baselines=baselines, situations=situations)
+        devices = cpu_devices_for_run(cpu_devices)
+        rows = run(
+            out,
+            episodes,
+            seconds,
+            scene,
+            progress=not no_progress,
+            baselines=baselines,
+            situations=situations,
+            devices=devices,
+        )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
         print(f"wrote {out}/snake_pipe.csv, snake_pipe_trajectories.png")
