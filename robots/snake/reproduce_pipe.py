@@ -33,8 +33,15 @@ Writes, in ``--out DIR``:
 - ``snake_pipe_trajectories.png``: the head's path of every episode, per
   situation, with the pipes drawn at their places.
 
+With ``--compare-modes N``, also ``snake_pipe_modes.csv`` and ``.png``: N
+standing-right episodes of ``--seconds`` each in the synchronous and the
+asynchronous mode on the contrast-threshold DVS, and in the default sync
+mode on frame differences, paired episode by episode
+(`robots.snake.reproduce_pipe_modes`).
+
 Defaults: 256 episodes per situation of 60 s each (at about 0.1 m/s the
-farthest starts, 4 m, need 40 s straight), 64 of them with the baselines.
+farthest starts, 4 m, need 40 s straight), 64 of them with the baselines;
+each batch split over one CPU device a core (``--cpu-devices``).
 Timings and results: docs/BENCHMARKS.md, "Snake pipe loop".
 """
 
@@ -48,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from robots.common import write_csv
-from spikejax.commands import Command, add_common, count, output_directory
+from spikejax.commands import Command, add_common, count, count_or_zero, output_directory
 from spikejax.errors import UserError
 
 # robots.snake.pipes and the env (MuJoCo) are imported by the functions that run the snake:
@@ -350,6 +357,14 @@ def _add_arguments(parser) -> None:
         "(default 64)",
     )
     parser.add_argument(
+        "--compare-modes",
+        type=count_or_zero,
+        default=0,
+        metavar="N",
+        help="also run N standing-right episodes in the sync and async modes on the contrast DVS and with frame "
+        "differences, paired (robots.snake.reproduce_pipe_modes; writes snake_pipe_modes.csv and .png; default 0)",
+    )
+    parser.add_argument(
         "--cpu-devices",
         type=count,
         default=None,
@@ -365,6 +380,7 @@ def reproduce_command_run(
     scene=None,
     baselines: int = 64,
     situations: list[str] | None = None,
+    compare_modes: int = 0,
     cpu_devices: int | None = None,
     no_progress: bool = False,
 ) -> int:
@@ -386,6 +402,16 @@ def reproduce_command_run(
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
         print(f"wrote {out}/snake_pipe.csv, snake_pipe_trajectories.png")
+        if compare_modes:
+            from robots.snake.reproduce_pipe_modes import MODE_HEADER
+            from robots.snake.reproduce_pipe_modes import compare_modes as run_modes
+
+            for r in run_modes(out, episodes=compare_modes, seconds=seconds, progress=not no_progress):
+                r = dict(zip(MODE_HEADER, r))
+                print(
+                    f"{r['mode']:<11} {r['successes']}/{r['episodes']} succeeded, {r['env_steps_per_s']:.0f} env-steps/s"
+                )
+            print(f"wrote {out}/snake_pipe_modes.csv, snake_pipe_modes.png")
         return 0
 
 
