@@ -230,8 +230,8 @@ def _plot(path: Path, results) -> None:
     fig = Figure(figsize=(4 * len(results), 4))
     for i, (name, res, scene) in enumerate(results):
         ax = fig.add_subplot(1, len(results), i + 1)
-        for head, ok in zip(res["head"], res["success"]):
-            ax.plot(head[:, 0], head[:, 1], lw=0.6, color="tab:green" if ok else "tab:red", alpha=0.6)
+        for head, ok, end in zip(res["head"], res["success"], res["end_step"]):  # the env runs on after the end
+            ax.plot(head[:end, 0], head[:end, 1], lw=0.6, color="tab:green" if ok else "tab:red", alpha=0.6)
         xy = np.asarray(scene.xy).reshape(-1, 2)
         valid = np.asarray(scene.valid).reshape(-1)
         ax.scatter(xy[valid, 0], xy[valid, 1], s=12, color="k", label="pipes")
