@@ -145,7 +145,8 @@ def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     assert reproduce_command_run(out=out, episodes=2, seconds=2.0, scene=str(scene), no_progress=True) == 0
     with open(out / "snake_pipe.csv") as f:
         rows = list(csv.reader(f))
-    assert rows[0] == HEADER and len(rows) == 2
+    assert rows[0] == HEADER and len(rows) == 4  # the spiking controller, then the two baselines on the same episodes
+    assert [r[1] for r in rows[1:]] == ["bang-bang", "straight", "privileged"]
     row = dict(zip(HEADER, rows[1]))
     assert row["situation"] == "pipe 1 (standing)" and int(row["episodes"]) == 2
     k = int(row["successes"])
