@@ -129,11 +129,39 @@ def test_failure_labels_take_the_first_cause_that_applies():
     assert names == [None, "never_detected", "missed_bore", "wrong_side", "overshoot", "lost", "timeout"]
 
 
+def test_distance_table_bins_the_errors_by_true_depth_and_kind():
+    from robots.snake.reproduce_pipe import DISTANCE_BINS, distance_rows
+
+    # Two episodes of 6 steps; the second ends after 4. Detections (d_est > 0) at known depths.
+    res = {
+        "detected": np.array([[1, 1, 0, 1, 1, 1], [1, 1, 1, 0, 1, 1]], float),
+        "entry_detected": np.array([[0, 0, 0, 1, 1, 0], [0, 0, 0, 0, 1, 1]], float),
+        "depth": np.array([[0.7, 1.2, 9.0, 2.2, 0.8, 3.5], [0.6, 2.9, 1.1, 9.0, 9.0, 9.0]]),
+        "d_est": np.array([[0.8, 1.0, 0.0, 2.0, 0.9, 3.0], [0.6, 2.6, 0.0, 0.0, 5.0, 5.0]]),
+        "end_step": np.array([6, 4]),
+    }
+    rows = {(r[2], r[3], r[4]): r for r in distance_rows("s", "bang-bang", res)}
+    # Body: errors 0.1 at 0.7 and 0.0 at 0.6 (bin 0.5-1), 0.2 at 1.2 (1-1.5), 0.3 at 2.9 (2.5-3), 0.5 at 3.5;
+    # d_est 0 at 1.1 is no estimate, and the second episode's steps 5-6 come after its end.
+    assert rows[("body", 0.5, 1.0)][5:8] == [2, pytest.approx(0.05), pytest.approx(0.05)]
+    assert rows[("body", 1.0, 1.5)][5:7] == [1, pytest.approx(0.2)]
+    assert rows[("body", 2.5, 3.0)][5:7] == [1, pytest.approx(0.3)]
+    assert rows[("body", 3.0, 4.0)][5:7] == [1, pytest.approx(0.5)]
+    assert rows[("body", 0.5, 1.0)][8] == pytest.approx((0.1 / 0.7 + 0.0) / 2)
+    assert DISTANCE_BINS[-1] == (0.5, 3.0) and rows[("body", 0.5, 3.0)][5:7] == [4, pytest.approx(0.6 / 4)]
+    # Entry: 0.2 at 2.2 and 0.1 at 0.8.
+    assert rows[("entry", 0.5, 1.0)][5:7] == [1, pytest.approx(0.1)] and rows[("entry", 2.0, 2.5)][5:7] == [
+        1,
+        pytest.approx(0.2),
+    ]
+    assert rows[("entry", 1.5, 2.0)][5] == 0
+
+
 @pytest.mark.slow  # 12-22 s, mostly compiling a second loop (the fast budget is spent above)
 def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     import csv
 
-    from robots.snake.reproduce_pipe import HEADER, LABELS, reproduce_command_run
+    from robots.snake.reproduce_pipe import DISTANCE_HEADER, HEADER, LABELS, reproduce_command_run
     from spikejax.stats import wilson_interval
 
     scene = tmp_path / "scene.toml"
@@ -159,3 +187,27 @@ def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     fails = [int(row[f"fail_{label}"]) for label in LABELS]
     assert sum(fails) == 2 and max(fails) == 2
     assert (out / "snake_pipe_trajectories.png").stat().st_size > 0
+    with open(out / "snake_pipe_distance.csv") as f:
+        assert next(csv.reader(f)) == DISTANCE_HEADER
+
+
+@pytest.mark.slow  # about 40 s: two batch shapes compiled
+def test_refilled_lanes_give_each_episode_the_trial_it_gets_alone(monkeypatch):
+    """`reproduce_pipe._episodes` restarts a finished lane with the next episode: nothing about an episode changes."""
+    from robots.snake import reproduce_pipe as rp
+
+    monkeypatch.setattr(rp, "SEGMENT", 4)  # slots a batch runs between refills
+    slots = 12
+    env = pipe_env.PipeEnv(max_steps=slots * 5)
+    # Episode 0 starts 0.35 m from a pipe (the head is already within 0.3 m of its surface: done in the
+    # first segment), the others at the test placements: its lane takes episode 2 after one segment.
+    scenes = [_scene(0.35, 0.0), _scene(*PLACEMENTS[0]), _scene(*PLACEMENTS[1])]
+    scenes = jax.tree.map(lambda *a: jnp.stack(a), *scenes)
+    keys = jax.random.split(jax.random.key(3), 3)
+    params = rp._switch_params(pc.ControllerParams(), "bang-bang", 3)
+    refilled = rp._episodes(env, scenes, keys, slots, params, False, "", size=2)
+    alone = rp._episodes(env, scenes, keys, slots, params, False, "", size=3)
+    assert refilled["end_step"][0] <= 4 * 5 and refilled["success"][0]
+    assert list(refilled["end_step"][1:]) == [slots * 5] * 2  # the others run to the end
+    for name in alone:
+        np.testing.assert_array_equal(refilled[name], alone[name], err_msg=name)

@@ -30,6 +30,10 @@ Writes, in ``--out DIR``:
   true offset's side); ``overshoot`` (the pipe ended behind the camera);
   ``lost`` (no detection in the last ``lost_slots`` slots);
   ``timeout`` (still approaching).
+- ``snake_pipe_distance.csv``: the distance error of Alg. 3 (Eq. 8 with the
+  known size) against the true depth at the spiking controller's
+  detections, per situation, kind of detection (body, entry) and 0.5 m bin
+  of the true depth (`DISTANCE_BINS`, `distance_rows`).
 - ``snake_pipe_trajectories.png``: the head's path of every episode, per
   situation, with the pipes drawn at their places.
 
@@ -77,6 +81,19 @@ HEADER = [
     "sign_accuracy",
     *(f"fail_{label}" for label in LABELS),
 ]
+DISTANCE_HEADER = [
+    "situation",
+    "controller",
+    "detection",
+    "depth_low_m",
+    "depth_high_m",
+    "detections",
+    "mean_abs_error_m",
+    "median_abs_error_m",
+    "mean_relative_error",
+]
+DISTANCE_BINS = ((0.5, 1.0), (1.0, 1.5), (1.5, 2.0), (2.0, 2.5), (2.5, 3.0), (3.0, 4.0), (0.5, 3.0))
+"""True-depth bins, m, of the distance-error table (ACCEPTANCE.md #3's 0.5 m bins; the last row pools 0.5-3 m)."""
 CHUNK = 64  # episodes per compiled batch
 CIRCLE_CHUNK = 16  # with the circle grid: its (32, 128, 128) state and spectra per episode outgrow the cache
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
@@ -123,51 +140,98 @@ def _programs(env, devices: int = 1):
 
 
 def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size: int = CHUNK, devices: int = 1):
-    """Each episode of ``keys`` / ``scenes`` for ``slots`` slots, ``CHUNK`` at a time, with `robots.snake.pipe_controller.switch`.
+    """Each episode of ``keys`` / ``scenes`` for ``slots`` slots, ``size`` lanes at a time, with `robots.snake.pipe_controller.switch`.
 
-    Chunks of ``size`` episodes (the last padded with repeats), so that
-    every call has one batch shape. A chunk runs ``SEGMENT`` slots at a time and stops once every episode in
-    it is done (success or a collision with a standing pipe; ``env`` times
-    out at the run's length): the rest of its record is padded (outcomes and
-    positions held, detections and actions 0), as the record of a finished
-    episode is never read past its end.
+    One batch of ``size`` lanes (one compile) runs ``SEGMENT`` slots at a
+    time; after each segment a lane whose episode is done (success, a
+    collision with a standing pipe, or the env's timeout at the run's length)
+    takes the next episode, started afresh at that segment boundary (a
+    slot boundary, so the slots of every episode still end at the same
+    steps of its own time). Episodes are independent lanes of a ``vmap``:
+    an episode's trial does not depend on its lane or its neighbours, so
+    refilling changes no result, and the batch never waits for its slowest
+    episode. A finished episode's record is padded to the run's length
+    (outcomes and positions held, detections and actions 0), as it is never
+    read past its end.
     """
     from tqdm import tqdm
 
     start, segment = _programs(env, devices)
-    zero_pad = ("detected", "in_view")
-    keep = ("detected", "d_est", "depth", "offset_est", "offset_true", "in_view", "success", "reached")
+    merge = _merge_program()
+    zero_pad = ("detected", "entry_detected", "in_view")
+    keep = (
+        "detected",
+        "entry_detected",
+        "d_est",
+        "depth",
+        "offset_est",
+        "offset_true",
+        "in_view",
+        "success",
+        "reached",
+    )
     steps = slots * env.slot_steps
-    parts = []
     n = keys.shape[0]
+    size = min(size, n)
+    pick = lambda tree, idx: jax.tree.map(lambda a: a[idx], tree)  # noqa: E731
+    lane = np.arange(size)  # the episode each lane runs
+    queue = size  # the next episode to start
+    carry = start(keys[lane], pick(scenes, lane))
+    lane_params = pick(params, lane)
+    parts: list[list] = [[] for _ in range(size)]
+    ran = np.zeros(size, int)  # slots each lane's episode has run
+    live = np.ones(size, bool)
+    results: dict[int, dict] = {}
     bar = tqdm(total=n, desc=desc, disable=not progress, unit="episode")
-    for lo in range(0, n, size):
-        idx = np.arange(lo, min(lo + size, n))
-        pad = np.concatenate([idx, np.full(size - idx.size, idx[-1])])  # one batch shape: one compile
-        chunk_params = jax.tree.map(lambda a: a[pad], params)
-        carry = start(keys[pad], jax.tree.map(lambda a: a[pad], scenes))
-        records, run_slots = [], 0
-        while run_slots < slots:
-            carry, record = segment(carry, chunk_params)
-            record = jax.tree.map(lambda a: np.asarray(a)[: idx.size], record)
-            records.append(record)
-            run_slots += SEGMENT
-            if np.all(np.asarray(carry[0].done)[: idx.size] > 0):
-                break
-        record = jax.tree.map(lambda *a: np.concatenate(a, axis=1), *records)
-        out = {k: _pad(record["metrics"][k], steps, k not in zero_pad) for k in keep}
-        out["head"] = _pad(record["head"], steps, True)
-        out["action"] = _pad(record["action"], steps, False)
-        out["done"] = _pad(record["done"], steps, True)
-        parts.append(out)
-        bar.update(idx.size)
+    while live.any():
+        carry, record = segment(carry, lane_params)
+        record = jax.tree.map(
+            np.asarray, {"metrics": record["metrics"], **{k: record[k] for k in ("head", "action", "done")}}
+        )
+        ran += SEGMENT
+        finished = live & ((np.asarray(carry[0].done) > 0) | (ran >= slots))
+        for i in np.flatnonzero(live):
+            parts[i].append(jax.tree.map(lambda a, i=i: a[i], record))
+        for i in np.flatnonzero(finished):
+            rec = jax.tree.map(lambda *a: np.concatenate(a, axis=0), *parts[i])
+            out = {k: _pad(rec["metrics"][k][None], steps, k not in zero_pad)[0] for k in keep}
+            for k in ("head", "action", "done"):
+                out[k] = _pad(rec[k][None], steps, k != "action")[0]
+            results[int(lane[i])] = out
+            parts[i] = []
+            bar.update(1)
+        fresh = np.zeros(size, bool)
+        for i in np.flatnonzero(finished):
+            if queue < n:
+                lane[i], queue, ran[i], fresh[i] = queue, queue + 1, 0, True
+            else:
+                live[i] = False
+        if fresh.any() and live.any():
+            new = start(keys[lane], pick(scenes, lane))  # every lane, one batch shape; only the fresh ones are kept
+            carry = merge(jnp.asarray(fresh), new, carry)
+            lane_params = pick(params, lane)
     bar.close()
-    res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    res = {k: np.stack([results[i][k] for i in range(n)]) for k in results[0]}
     for k in ("success", "reached"):
         res[k] = res[k][:, -1] > 0
     hit = res.pop("done") > 0
     res["end_step"] = np.where(hit.any(1), hit.argmax(1) + 1, steps)  # steps up to and including the end
     return res
+
+
+@functools.cache
+def _merge_program():
+    """``merge(mask, new, old)``: per lane (leading axis), ``new`` where ``mask`` holds, else ``old``."""
+
+    def pick(mask, a, b):
+        if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key):  # typed keys: choose their data
+            return jax.random.wrap_key_data(pick(mask, jax.random.key_data(a), jax.random.key_data(b)))
+        return jnp.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b)
+
+    def merge(mask, new, old):
+        return jax.tree.map(lambda a, b: pick(mask, a, b), new, old)
+
+    return jax.jit(merge)
 
 
 def summarize(name, controller, res, lying: bool, dt: float, slot_steps: int, lost_slots: int) -> list:
@@ -222,6 +286,32 @@ def summarize(name, controller, res, lying: bool, dt: float, slot_steps: int, lo
         rate(sign_ok),
         *(int((labels == i).sum()) for i in range(len(LABELS))),
     ]
+
+
+def distance_rows(name, controller, res) -> list[list]:
+    """`DISTANCE_HEADER` rows: |Eq. (8) distance - true depth| at the detections, per kind and `DISTANCE_BINS` bin.
+
+    A detection counts up to its episode's end and where Alg. 3 gave a
+    distance (``d_est > 0``); ``body`` are the slots steered by the body,
+    ``entry`` those steered by the entry (the lying pipes' circle grid).
+    """
+    live = np.arange(res["detected"].shape[1])[None, :] < res["end_step"][:, None]
+    det = (res["detected"] > 0) & live & (res["d_est"] > 0)
+    entry = res["entry_detected"] > 0
+    rows = []
+    for kind, which in (("body", det & ~entry), ("entry", det & entry)):
+        if not which.any():
+            continue
+        depth, est = res["depth"][which], res["d_est"][which]
+        for low, high in DISTANCE_BINS:
+            m = (depth >= low) & (depth < high)
+            err = np.abs(est - depth)[m]
+            stat = lambda f, e=err: float(f(e)) if e.size else float("nan")  # noqa: E731
+            rel = np.abs(est - depth)[m] / depth[m]
+            rows.append(
+                [name, controller, kind, low, high, int(m.sum()), stat(np.mean), stat(np.median), stat(np.mean, rel)]
+            )
+    return rows
 
 
 def _plot(path: Path, results) -> None:
@@ -286,7 +376,7 @@ def run(
         raise UserError(f"--seconds must be positive, got {seconds}")
     if baselines < 0:
         raise UserError(f"--baselines must be >= 0, got {baselines}")
-    rows, results = [], []
+    rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
     def steps_for(env):
@@ -332,7 +422,9 @@ def run(
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, int(machine.lost_slots)))
             if controller == "bang-bang":
                 results.append((name, res, sub))
+                distance += distance_rows(name, controller, res)
     write_csv(out / "snake_pipe.csv", HEADER, rows)
+    write_csv(out / "snake_pipe_distance.csv", DISTANCE_HEADER, distance)
     _plot(out / "snake_pipe_trajectories.png", results)
     return rows
 
@@ -401,7 +493,7 @@ def reproduce_command_run(
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
-        print(f"wrote {out}/snake_pipe.csv, snake_pipe_trajectories.png")
+        print(f"wrote {out}/snake_pipe.csv, snake_pipe_distance.csv, snake_pipe_trajectories.png")
         if compare_modes:
             from robots.snake.reproduce_pipe_modes import MODE_HEADER
             from robots.snake.reproduce_pipe_modes import compare_modes as run_modes
