@@ -209,6 +209,48 @@ def test_camera_offset_decides_the_sign_when_the_pipe_is_ahead():
     assert int(est.control) == -1
 
 
+def _pipe(t, width, pos, valid=True):
+    f = jnp.float32
+    return pp.Pipe(f(t), f(math.pi / 2), f(width), f(pos), f(64.0), jnp.int32(0), f(1), jnp.bool_(valid), f(1))
+
+
+def test_off_axis_correction_recovers_the_depth_of_a_cylinder_seen_aside():
+    # A cylinder of radius R at depth Z and lateral X: its edges are the tangents from the camera,
+    # at bearings b +- asin(R / D), projected at f tan(.). Eq. (8) reads D cos^2 b; divided by cos b
+    # (the bearing from the edges' midpoint) it reads the depth to within the R^2/D^2 terms.
+    params = pp.track_params(size=0.25)
+    fixed = params._replace(off_axis=jnp.float32(1.0))
+    f, R = float(params.focal), 0.125
+    for Z, X in ((2.0, 0.7), (1.0, -0.4), (3.0, 1.2)):
+        D, b = math.hypot(Z, X), math.atan2(X, Z)
+        a = math.asin(R / D)
+        left, right = f * math.tan(b - a), f * math.tan(b + a)
+        pipe = _pipe(0.0, right - left, 64.0 + 0.5 * (left + right))
+        plain = float(pp.track_step(params, pp.track_init(), pipe, 0.0, 0.0)[1].distance)
+        corrected = float(pp.track_step(fixed, pp.track_init(), pipe, 0.0, 0.0)[1].distance)
+        assert plain == pytest.approx(D * math.cos(b) ** 2, rel=0.02)
+        assert corrected == pytest.approx(Z, rel=0.01) and abs(corrected - Z) < abs(plain - Z)
+
+
+def test_smoothing_takes_the_median_of_recent_distances_brought_forward():
+    f = float(pp.track_params().focal)
+    params = pp.track_params(size=0.25, speed=0.1, smooth=3.0)
+    state = pp.track_init(4)
+    # Eq. (8) distances 2.0, 2.6 (an outlier), 1.9 and 1.8 at t = 0, 1, 2, 3.5 s, widths f l / d.
+    distances = (2.0, 2.6, 1.9, 1.8)
+    out = []
+    for t, d in zip((0.0, 1.0, 2.0, 3.5), distances):
+        state, est = pp.track_step(params, state, _pipe(t, f * 0.25 / d, 64.0), 0.0, 0.0)
+        out.append(float(est.distance))
+    # Brought forward to each detection's time: at t = 1: median(2.0 - 0.1, 2.6) = 2.25; at t = 2:
+    # median(1.8, 2.5, 1.9) = 1.9; at t = 3.5 the first is 3.5 s old (out of the 3 s): median(2.35, 1.75, 1.8).
+    np.testing.assert_allclose(out, [2.0, 2.25, 1.9, 1.8], rtol=1e-5)
+    # An invalid detection changes nothing and gives no distance.
+    state2, est = pp.track_step(params, state, _pipe(4.0, 10.0, 64.0, valid=False), 0.0, 0.0)
+    assert float(est.distance) == 0.0
+    np.testing.assert_array_equal(np.asarray(state2.distance), np.asarray(state.distance))
+
+
 def test_track_vmaps_over_streams():
     t, _, width = _approach(12)
     ones = jnp.ones(12)

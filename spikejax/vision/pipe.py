@@ -611,7 +611,7 @@ def pipe_offset(distance, pos, center, focal):
     return distance * (pos - center) / focal
 
 
-@ranged(focal=POSITIVE, size=NON_NEGATIVE, speed=NON_NEGATIVE, assumed_distance=NON_NEGATIVE)
+@ranged(focal=POSITIVE, size=NON_NEGATIVE, speed=NON_NEGATIVE, assumed_distance=NON_NEGATIVE, smooth=NON_NEGATIVE)
 class TrackParams(NamedTuple):
     """Parameters of Alg. 3 (traced; build them with `track_params`).
 
@@ -629,6 +629,17 @@ class TrackParams(NamedTuple):
             and ``C`` follows the camera's own swing, whatever side the pipe
             is on. A positive value keeps the side of the pipe in the image
             from the first detection (see `spikejax.vision.stream`).
+        off_axis: 1 to divide Eq. (8)'s distance by the cosine of the
+            pipe's bearing ``atan((pos - c) / f)``, 0 (the paper) not to.
+            A cylinder of radius ``R`` seen at bearing ``b`` and distance
+            ``D`` spans ``w ~ 2 f R / (D cos^2 b)`` pixels, so Eq. (8) gives
+            ``D cos^2 b``: the depth along the optical axis, ``D cos b``,
+            times ``cos b``; a swinging head camera sees the pipe 10-25
+            degrees aside, 2-10 % short.
+        smooth: seconds over which Eq. (8)'s distances are pooled, 0 (the
+            paper) for none: the median of the last ``interval`` detections'
+            distances within ``smooth`` s, each brought forward by
+            ``speed`` times its age (the robot's approach since).
     """
 
     focal: jax.Array
@@ -640,6 +651,8 @@ class TrackParams(NamedTuple):
     swing_phase: jax.Array
     omega: jax.Array
     assumed_distance: jax.Array
+    off_axis: jax.Array | float = 0.0
+    smooth: jax.Array | float = 0.0
 
 
 @ranged(fov=Range(0, math.pi, low_open=True, high_open=True), width=Range(1, integer=True))
@@ -654,6 +667,8 @@ def track_params(
     swing_phase: float = 0.0,
     omega: float = 1.0,
     assumed_distance: float = 0.0,
+    off_axis: bool = False,
+    smooth: float = 0.0,
 ) -> TrackParams:
     """`TrackParams` from the camera's field of view (rad, in ``(0, pi)``) and width (pixels).
 
@@ -671,15 +686,18 @@ def track_params(
         swing_phase=f(swing_phase),
         omega=f(omega),
         assumed_distance=f(assumed_distance),
+        off_axis=f(1.0 if off_axis else 0.0),
+        smooth=f(smooth),
     )
 
 
 class TrackState(NamedTuple):
-    """The last ``interval`` detections' times and widths (a ring), and how many there were."""
+    """The last ``interval`` detections' times, widths and Eq. (8) distances (a ring), and how many there were."""
 
     t: jax.Array  # (interval,) s
     width: jax.Array  # (interval,) pixels
     count: jax.Array  # () int32, valid detections so far
+    distance: jax.Array  # (interval,) m, Eq. (8) (off-axis corrected when asked), for ``smooth``
 
 
 class Estimate(NamedTuple):
@@ -695,9 +713,8 @@ class Estimate(NamedTuple):
 
 def track_init(interval: int = 10) -> TrackState:
     """An empty history for Eq. (9) over ``interval`` detections (10 in the paper)."""
-    return TrackState(
-        jnp.zeros((interval,), jnp.float32), jnp.zeros((interval,), jnp.float32), jnp.zeros((), jnp.int32)
-    )
+    z = jnp.zeros((interval,), jnp.float32)
+    return TrackState(z, z, jnp.zeros((), jnp.int32), z)
 
 
 def track_step(
@@ -727,6 +744,14 @@ def track_step(
     slot = state.count % interval
     known = params.size > 0
     d_known = distance_from_size(pipe.width, params.focal, jnp.where(known, params.size, 0.0))
+    bearing = (pipe.pos - params.center) / params.focal  # tan b
+    d_known = d_known * jnp.where(params.off_axis > 0, jnp.sqrt(1.0 + bearing * bearing), 1.0)
+    d_ring = jnp.where(pipe.valid, state.distance.at[slot].set(d_known), state.distance)
+    t_ring = jnp.where(pipe.valid, state.t.at[slot].set(pipe.t), state.t)
+    age = pipe.t - t_ring
+    present = (jnp.arange(interval) < state.count + 1) & (age <= params.smooth) & (d_ring > 0)
+    pooled = jnp.nanmedian(jnp.where(present, d_ring - params.speed * age, jnp.nan))
+    d_known = jnp.where((params.smooth > 0) & jnp.any(present), pooled, d_known)
     d_grown = distance_from_expansion(state.width[slot], pipe.width, pipe.t - state.t[slot], params.speed)
     d_grown = jnp.where(state.count >= interval, d_grown, 0.0)
     distance = jnp.where(pipe.valid, jnp.where(known, d_known, d_grown), 0.0)
@@ -745,9 +770,10 @@ def track_step(
         valid=pipe.valid,
     )
     new = TrackState(
-        t=jnp.where(pipe.valid, state.t.at[slot].set(pipe.t), state.t),
+        t=t_ring,
         width=jnp.where(pipe.valid, state.width.at[slot].set(pipe.width), state.width),
         count=state.count + pipe.valid.astype(jnp.int32),
+        distance=d_ring,
     )
     return new, estimate
 
