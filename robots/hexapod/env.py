@@ -78,7 +78,10 @@ vmapped batch reaches C as one ``mujoco.rollout`` call on a persistent thread
 pool), as the snake's `robots.snake.physics` does; what crosses is MuJoCo's
 full physics state in float32. The solver's warm start is not carried between
 steps (it is not part of the state): each step starts it from zero.
-Only the ``"mujoco"`` backend exists; an MJX backend is not written yet.
+``backend="mjx"`` steps the same pool with MJX inside the XLA program instead
+(`robots.hexapod.physics.mjx_stepper`: one program on an accelerator, no host
+round trip), from and to the same state; it walks as the C engine does within
+the tolerances of ``tests/test_hexapod_loop.py``.
 
 With ``see=False`` the camera, DVS and SNN are skipped (their info fields are
 zeros): for controllers that read only the truth (the oracle, the random
@@ -123,7 +126,7 @@ __all__ = [
     "world_track",
 ]
 
-BACKENDS = ("mujoco",)
+BACKENDS = ("mujoco", "mjx")
 CAPTURE_MARGIN = 0.2  # m beyond the near boundary
 LOST_BEARING = math.radians(90.0)  # every living prey behind the camera: the episode is lost
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -208,7 +211,8 @@ class HexapodEnv(Env):
     """Hunt prey with the hexapod: the gait is the action, the visual SNN's counts the observation (module docstring).
 
     Args:
-        backend: physics backend; ``"mujoco"`` (MuJoCo's C engine) only, for now.
+        backend: physics backend: ``"mujoco"`` (MuJoCo's C engine, the choice on a CPU) or ``"mjx"``
+            (MJX in the XLA program, the choice on an accelerator).
         n_robots: randomised robots in the pool (`physics.randomised`), one drawn per episode.
         robot_seed: seed of the pool's randomisation.
         network_seed: seed of the trained SCPG (`trained_network`).
@@ -253,7 +257,11 @@ class HexapodEnv(Env):
         torso0 = np.stack([w.xy[:, 0], w.xy[:, 1], w.height, w.roll, w.pitch, w.yaw], axis=-1)
         self.torso0 = jnp.asarray(torso0, jnp.float32)
         self.n_robots = n_robots
-        self._runner = _Runner(models, nthread or os.cpu_count() or 1, frame_every)
+        self._backend = backend
+        if backend == "mjx":
+            self._mjx = physics.mjx_stepper(models, frame_every)
+        else:
+            self._runner = _Runner(models, nthread or os.cpu_count() or 1, frame_every)
         self._shapes = (
             jax.ShapeDtypeStruct((standing.shape[1],), jnp.float32),
             jax.ShapeDtypeStruct((_FRAMES, 6), jnp.float32),
@@ -269,7 +277,7 @@ class HexapodEnv(Env):
 
     @property
     def backend(self) -> str:
-        return "mujoco"
+        return self._backend
 
     def _truth(self, scene, torso_world):
         pose = cam.ground_pose(torso_world)
@@ -336,9 +344,12 @@ class HexapodEnv(Env):
         raster = jax.lax.dynamic_update_slice(info["raster"], rows, (PERIOD * k, 0))
         t = (k * self.substeps + jnp.arange(self.substeps)).astype(jnp.float32) * self.dt
         controls = servo_targets(self.step_params, raster, t)
-        phys, frames = jax.pure_callback(
-            self._runner, self._shapes, info["phys"], info["robot"], controls, vmap_method="broadcast_all"
-        )
+        if self._backend == "mjx":
+            phys, frames = self._mjx(info["phys"], info["robot"], controls)
+        else:
+            phys, frames = jax.pure_callback(
+                self._runner, self._shapes, info["phys"], info["robot"], controls, vmap_method="broadcast_all"
+            )
         scene = info["scene"]
         rng, k_see = jax.random.split(info["rng"])
         if self.see:

@@ -14,6 +14,9 @@ different servo-target sequences with ``mujoco.rollout`` (one C thread per
 core), from the robot standing still on its six feet; `mjx_walk` does the same
 for one robot and a batch of sequences as one XLA program with MJX (for
 accelerators), and agrees with it (``tests/test_hexapod_walk.py``).
+`mjx_stepper` is the closed loop's MJX physics: a pool of randomised robots,
+one picked per call by a traced index, stepped from MuJoCo's full physics state
+as `robots.hexapod.env.HexapodEnv`'s C backend steps it.
 """
 
 from __future__ import annotations
@@ -28,7 +31,18 @@ from mujoco import rollout as mj_rollout
 
 from spikejax.errors import UserError
 
-__all__ = ["MODEL_PATH", "load_model", "randomised", "standing_state", "Walk", "walk", "torso_walk", "mjx_walk"]
+__all__ = [
+    "MODEL_PATH",
+    "load_model",
+    "randomised",
+    "standing_state",
+    "Walk",
+    "walk",
+    "torso_walk",
+    "torso_states",
+    "mjx_walk",
+    "mjx_stepper",
+]
 
 MODEL_PATH = Path(__file__).with_name("hexapod.xml")
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -142,3 +156,56 @@ def mjx_walk(model: mujoco.MjModel, controls) -> Walk:
 
     qpos = np.asarray(jax.jit(jax.vmap(one))(controls), np.float64)
     return torso_walk((np.arange(controls.shape[1]) + 1) * model.opt.timestep, qpos)
+
+
+def torso_states(qpos):
+    """The torso's ``(x, y, z, roll, pitch, yaw)`` from ``qpos[..., n_samples, :7]`` in JAX, yaw unwrapped over the samples.
+
+    `torso_walk`'s angles, for a traced ``qpos`` of shape ``(..., n_samples, nq)``.
+    """
+    import jax.numpy as jnp
+
+    w, x, y, z = (qpos[..., 3 + i] for i in range(4))
+    yaw = jnp.unwrap(jnp.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), axis=-1)
+    roll = jnp.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = jnp.arcsin(jnp.clip(2 * (w * y - z * x), -1, 1))
+    return jnp.stack([qpos[..., 0], qpos[..., 1], qpos[..., 2], roll, pitch, yaw], axis=-1)
+
+
+def mjx_stepper(models: list[mujoco.MjModel], sample_every: int):
+    """The MJX twin of ``mujoco.rollout`` for a pool of robots: ``step(state, robot, controls) -> (state, torso)``.
+
+    ``models`` differ only in their values (`randomised` draws of one MJCF):
+    their MJX models are stacked and ``robot`` (traced int) picks one, so a
+    ``vmap`` over episodes walks different robots in one program. ``state`` is
+    MuJoCo's full physics state (``mjSTATE_FULLPHYSICS``: time, qpos, qvel; the
+    hexapod has no actuator state, history or plugins), ``controls`` the servo
+    targets of each physics step ``(n_steps, nu)``; the torso ``(n_steps //
+    sample_every, 6)`` (`torso_states`) is sampled after every
+    ``sample_every``-th step. The solver starts each call from a zero warm
+    start, as the C backend does.
+    """
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    m = models[0]
+    if m.na or mujoco.mj_stateSize(m, _STATE) != 1 + m.nq + m.nv:
+        raise UserError("mjx_stepper needs a model whose full physics state is (time, qpos, qvel)")
+    pool = jax.tree.map(lambda *xs: jnp.stack(xs), *[mjx.put_model(x) for x in models])
+    blank = mjx.make_data(mjx.put_model(m))
+    nq, nv = m.nq, m.nv
+
+    def step(state, robot, controls):
+        mx = jax.tree.map(lambda a: a[robot], pool)
+        d = blank.replace(time=state[0], qpos=state[1 : 1 + nq], qvel=state[1 + nq : 1 + nq + nv])
+
+        def substep(d, c):
+            d = mjx.step(mx, d.replace(ctrl=c))
+            return d, d.qpos
+
+        d, qpos = jax.lax.scan(substep, d, controls.astype(jnp.float32))
+        full = jnp.concatenate([d.time[None], d.qpos, d.qvel]).astype(jnp.float32)
+        return full, torso_states(qpos[sample_every - 1 :: sample_every])
+
+    return step

@@ -77,7 +77,7 @@ from tqdm import tqdm
 from robots.common import write_csv
 from robots.hexapod import controllers
 from robots.hexapod import prey as prey_mod
-from robots.hexapod.env import STEP_S, HexapodEnv
+from robots.hexapod.env import BACKENDS, STEP_S, HexapodEnv
 from robots.hexapod.gaits import N_LEGS, PERIOD
 from spikejax.commands import Command, count, output_directory, positive_float
 from spikejax.energy import LOIHI_J_PER_SPIKE, PAPER_HEXAPOD, spike_energy
@@ -465,9 +465,10 @@ def run(
     scene: str | None = None,
     seconds: float = 12.8,
     seed: int = 0,
+    backend: str = "mujoco",
     no_progress: bool = False,
 ) -> int:
-    """``spikejax reproduce hexapod-prey --out DIR [--episodes N] [--scene FILE] [--seconds S] [--seed S]``.
+    """``spikejax reproduce hexapod-prey --out DIR [--episodes N] [--scene FILE] [--seconds S] [--seed S] [--backend B]``.
 
     Args:
         out: output directory.
@@ -475,6 +476,7 @@ def run(
         scene: a scene file (TOML, `prey.load_scene`) every episode uses.
         seconds: an episode's time limit, s.
         seed: seed of the scenes, robots and sensor noise.
+        backend: the physics, ``"mujoco"`` (MuJoCo's C engine) or ``"mjx"`` (`HexapodEnv`).
         no_progress: hide the progress bars.
     """
     if episodes < 1:
@@ -482,8 +484,8 @@ def run(
     fixed = prey_mod.load_scene(scene) if scene is not None else None
     with output_directory(out, command="reproduce hexapod-prey") as out:
         envs = {
-            True: HexapodEnv(seconds=seconds, robot_seed=seed),
-            False: HexapodEnv(seconds=seconds, robot_seed=seed, see=False),
+            True: HexapodEnv(backend, seconds=seconds, robot_seed=seed),
+            False: HexapodEnv(backend, seconds=seconds, robot_seed=seed, see=False),
         }
         few = max(1, episodes // 10)
         if fixed is not None:
@@ -564,6 +566,12 @@ def _add_arguments(parser) -> None:
         "--seconds", type=positive_float, default=12.8, help="time limit of an episode, s (default 12.8)"
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of scenes, robots and sensor noise (default 0)")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="mujoco",
+        help="physics: mujoco (MuJoCo's C engine, for CPUs; default) or mjx (for accelerators)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
 
 
