@@ -162,6 +162,30 @@ def test_summary_arithmetic_on_hand_made_episodes():
     assert row["decisions_per_wall_s"] == pytest.approx(58 / 29.0)
 
 
+def test_reach_rows_bin_captures_by_the_prey_s_initial_bearing_and_offset():
+    """Three hand-placed prey from a start turned 90 deg left: bearings 0, 11.3 and 18.4 deg, offsets 0, 0.2, 0.5 m."""
+    start = jnp.asarray([[1.0, 2.0, math.pi / 2]] * 3, jnp.float32)
+    # Ahead is +y from this start and its left -x: 1 m ahead, 1 m ahead 0.2 m right, 1.5 m ahead 0.5 m left.
+    prey = np.zeros((3, prey_mod.MAX_PREY, 2), np.float32)
+    prey[:, 0] = [[1.0, 3.0], [1.2, 3.0], [0.5, 3.5]]
+    scenes = prey_mod.PreyScene(start, jnp.asarray(prey), jnp.full((3, 4), 0.03), jnp.arange(4)[None].repeat(3, 0) < 1)
+    bearing, lateral = rp.initial_offsets(scenes)
+    np.testing.assert_allclose(
+        bearing, [0.0, math.degrees(math.atan(0.2)), math.degrees(math.atan(0.5 / 1.5))], atol=1e-4
+    )
+    np.testing.assert_allclose(lateral, [0.0, 0.2, 0.5], atol=1e-6)
+    rows = rp.reach_rows("snn", np.array([True, True, False]), scenes)
+    assert all(len(r) == len(rp.REACH_HEADER) for r in rows)
+    by = {(r[1], r[2]): r for r in rows}
+    assert by[("bearing_deg", 0.0)][4:7] == [1, 1, 1.0]
+    assert by[("bearing_deg", 10.0)][4:7] == [1, 1, 1.0]
+    assert by[("bearing_deg", 15.0)][4:7] == [1, 0, 0.0]
+    assert by[("bearing_deg", 5.0)][4:] == [0, 0, "", "", ""]
+    assert by[("lateral_m", 0.2)][4:6] == [1, 1] and by[("lateral_m", 0.45)][4:6] == [1, 0]
+    low, high = by[("lateral_m", 0.0)][7:9]
+    assert 0.0 < low < 1.0 == high
+
+
 def test_energy_rows_charge_1_7_nj_a_spike_and_restate_the_paper():
     totals = {"dvs": 1000, "filter": 100, "layer2": 20, "layer3": 4, "gait": 6, "drive": 20, "cpg": 60}
     rows = {(r[0], r[1]): r for r in rp.energy_rows(totals, steps=10, captures=2)}
@@ -200,9 +224,9 @@ def test_a_bad_scene_file_is_one_line_before_any_work(tmp_path):
     with pytest.raises(UserError, match="cannot read"):
         rp.run(out=tmp_path / "out", episodes=1, scene=str(tmp_path / "missing.toml"))
     args = rp.command.parser("spikejax reproduce hexapod-prey").parse_args(
-        ["--out", "D", "--scene", str(bad), "--episodes", "3", "--seconds", "3.2"]
+        ["--out", "D", "--scene", str(bad), "--episodes", "3", "--seconds", "3.2", "--backend", "mjx"]
     )
-    assert (args.scene, args.episodes, args.seconds) == (str(bad), 3, 3.2)
+    assert (args.scene, args.episodes, args.seconds, args.backend) == (str(bad), 3, 3.2, "mjx")
 
 
 @pytest.mark.slow

@@ -39,6 +39,11 @@ Files in ``--out DIR``:
   2.55 mJ a step, which the paper calls "sub-mJ": it is 2.55 times a mJ);
 - ``hexapod_prey_trajectories.png``: the torso's path of many episodes over the
   arena per controller, and the Fig. 8 layout with the SNN's gaits per step;
+- ``hexapod_prey_reach.csv`` and ``.png``: single-prey capture against the
+  prey's initial bearing and lateral offset from the robot's heading, per
+  controller, with Wilson intervals (ACCEPTANCE A7's "success against initial
+  bearing": the paper's rule turns only at a near prey, so how far aside a
+  prey may start is set by the camera's view when it gets near);
 - ``hexapod_fig8.csv``: per controller and Fig. 8 episode, the gaits up to the
   second capture and their edit distance to the paper's;
 - ``hexapod_prey_raster.png``: the CPG neurons, the gait drive and the visual
@@ -93,6 +98,9 @@ __all__ = [
     "episode_keys",
     "run_episodes",
     "summarize",
+    "REACH_HEADER",
+    "initial_offsets",
+    "reach_rows",
     "energy_rows",
     "edit_distance",
     "fig8_gaits",
@@ -123,6 +131,11 @@ HEADER = [
     "decisions_per_sim_s",
     "decisions_per_wall_s",
 ]
+REACH_HEADER = ["controller", "measure", "low", "high", "episodes", "captured", "rate", "ci_low", "ci_high"]
+REACH_BINS = {
+    "bearing_deg": ((0.0, 5.0), (5.0, 10.0), (10.0, 15.0), (15.0, 20.0)),
+    "lateral_m": ((0.0, 0.1), (0.1, 0.2), (0.2, 0.3), (0.3, 0.45), (0.45, 0.9)),
+}
 ENERGY_HEADER = ["source", "layer", "spikes_per_step", "joules_per_step", "spikes_per_capture", "joules_per_capture"]
 LAYERS = ("dvs", "filter", "layer2", "layer3", "gait", "drive", "cpg")
 PAPER_FIG8 = "FFFRR|FFR"
@@ -299,6 +312,55 @@ def summarize(condition: str, controller: str, res: dict) -> list:
         round(1.0 / STEP_S, 4),
         round(steps / wall, 2) if wall > 0 else "",
     ]
+
+
+def initial_offsets(scenes: prey_mod.PreyScene) -> tuple[np.ndarray, np.ndarray]:
+    """Slot 0's prey from each scene's start: ``(|bearing| deg, |lateral offset| m)`` from the robot's heading."""
+    start = np.asarray(scenes.start, np.float64)
+    rel = np.asarray(scenes.prey, np.float64)[:, 0] - start[:, :2]
+    c, s = np.cos(start[:, 2]), np.sin(start[:, 2])
+    ahead, aside = c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]
+    return np.degrees(np.abs(np.arctan2(aside, ahead))), np.abs(aside)
+
+
+def reach_rows(controller: str, captured: np.ndarray, scenes: prey_mod.PreyScene) -> list[list]:
+    """``hexapod_prey_reach.csv``'s rows (`REACH_HEADER`) for one controller's single-prey episodes.
+
+    ``captured`` ``(n,)`` bool; the bins are `REACH_BINS` (low inclusive);
+    an empty bin gets empty rate columns.
+    """
+    bearing, lateral = initial_offsets(scenes)
+    captured = np.asarray(captured, bool)
+    rows = []
+    for measure, values in (("bearing_deg", bearing), ("lateral_m", lateral)):
+        for low, high in REACH_BINS[measure]:
+            sel = (values >= low) & (values < high)
+            n, k = int(sel.sum()), int(captured[sel].sum())
+            rates = _rate(k, n)[1:] if n else ["", "", ""]
+            rows.append([controller, measure, low, high, n, k, *rates])
+    return rows
+
+
+def _plot_reach(path: Path, rows: list[list]) -> None:
+    fig = Figure(figsize=(9, 3.6))
+    axes = fig.subplots(1, 2)
+    for ax, (measure, label) in zip(
+        axes, (("bearing_deg", "initial |bearing| (deg)"), ("lateral_m", "initial |lateral offset| (m)"))
+    ):
+        for name in dict.fromkeys(r[0] for r in rows):
+            sel = [r for r in rows if r[0] == name and r[1] == measure and r[4]]
+            mid = [(r[2] + r[3]) / 2 for r in sel]
+            rate = np.array([r[6] for r in sel])
+            err = np.array([[r[6] - r[7] for r in sel], [r[8] - r[6] for r in sel]])
+            ax.errorbar(mid, rate, yerr=err, marker="o", capsize=3, label=name)
+        ax.set_xlabel(label)
+        ax.set_ylim(-0.03, 1.03)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("captured (95 % Wilson)")
+    axes[0].legend(fontsize=8)
+    fig.suptitle("single prey: capture against where it starts", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def layer_counts(res: dict) -> dict[str, float]:
@@ -515,6 +577,12 @@ def run(
                 rows.append(summarize(name_c, name, res))
                 results[name_c][name] = (res, scenes)
         write_csv(out / "hexapod_prey.csv", HEADER, rows)
+        if "single" in results:
+            reach = []
+            for name, (res, scenes) in results["single"].items():
+                reach += reach_rows(name, (res["captures"] >= 0).any(axis=1), scenes)
+            write_csv(out / "hexapod_prey_reach.csv", REACH_HEADER, reach)
+            _plot_reach(out / "hexapod_prey_reach.png", reach)
         energy_cond = "scene" if fixed is not None else "single"
         res = results[energy_cond]["snn"][0]
         n_caught = int((res["captures"] >= 0).sum())
@@ -554,7 +622,7 @@ def run(
                 r8 = results["fig8"][name][0]
                 g = fig8_gaits(r8["gait"][0], r8["steps"][0], r8["captures"][0])
                 print(f"Fig. 8 gaits, {name}: {g} (paper {PAPER_FIG8}, edit distance {edit_distance(g, PAPER_FIG8)})")
-        print(f"wrote {out / 'hexapod_prey.csv'}, {out / 'hexapod_energy.csv'} and two figures")
+        print(f"wrote {out / 'hexapod_prey.csv'}, hexapod_energy.csv, hexapod_prey_reach.csv and the figures")
         return 0
 
 
