@@ -100,6 +100,28 @@ def test_crossings_split_the_overflow_into_clipped_and_beyond_capacity():
     assert clipped == 40 and int(overflow[0]) - clipped == 80 - int(events.count()[0]) == 30
 
 
+def test_step_counts_are_the_event_list_counted_per_pixel():
+    # A moving bright bar with mismatch, refractory and heavy shot noise; the list large enough to hold every event.
+    params = dvs.dvs_params(threshold_sigma=0.05, noise_rate=20.0, refractory=2e-3)
+    x = jnp.arange(24)
+    frames = [jnp.where((x[None, :] >= k) & (x[None, :] < k + 4), 0.9, 0.15) * jnp.ones((10, 1)) for k in range(6)]
+    key = jax.random.key(4)
+    state = dvs.init(params, frames[0], 0.0, key=key)
+    dense_state, total = state, 0
+    for k, frame in enumerate(frames[1:], start=1):
+        kk = jax.random.fold_in(key, k)
+        state, events, overflow = dvs.step(params, state, frame, 0.01 * k, capacity=2048, max_per_pixel=3, key=kk)
+        dense_state, counts, clipped = dvs.step_counts(params, dense_state, frame, 0.01 * k, max_per_pixel=3, key=kk)
+        image = jnp.zeros((10, 24), jnp.int32).at[events.y, events.x].add(events.valid.astype(jnp.int32))
+        np.testing.assert_array_equal(np.asarray(counts), np.asarray(image))
+        assert int(clipped) == int(overflow) and int(events.count()) < 2048
+        for a, b in zip(jax.tree.leaves(state), jax.tree.leaves(dense_state)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        total += int(counts.sum())
+    noise_only = int(np.asarray(counts)[:, 12:].sum())  # the bar never reached these columns
+    assert total > 200 and noise_only > 0
+
+
 def test_mismatch_and_noise_come_from_the_key():
     params = dvs.dvs_params(threshold_sigma=0.2, noise_rate=5.0)
     frames = jnp.stack([jnp.full((32, 32), v) for v in (0.3, 0.5, 0.5)])

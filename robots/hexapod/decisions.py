@@ -5,12 +5,13 @@ two CPG steps of 0.16 s (`robots.hexapod.legs.step_params`), on MuJoCo's C
 engine (`physics.walk`, each scene its own randomised robot). The head camera
 (`robots.hexapod.camera`) renders a frame every `FRAME_S` = 20 ms (SPEC 4.3:
 at least 10 frames a CPG step), 17 frames from the standing one. The
-contrast-threshold DVS emulator (`spikejax.vision.dvs.step`, thresholds 0.2
+contrast-threshold DVS emulator (`spikejax.vision.dvs.step_counts`, thresholds 0.2
 with 3 % mismatch, 0.5 Hz shot noise a pixel, at most `MAX_PER_PIXEL` events
-a pixel and interval, `capacity` events an interval) turns each interval into
-events; the crossings beyond `MAX_PER_PIXEL` (``clipped``) are counted apart
-from the events beyond the capacity (``overflow``; docs/BENCHMARKS.md gives
-both and what raising the cap changes);
+a pixel and interval) turns each interval into events, counted per pixel; the
+crossings beyond `MAX_PER_PIXEL` (``clipped``) are counted apart from the
+events an event list of `capacity` a frame interval would not hold
+(``overflow``: `dvs.step`'s list, whose count image this is whenever that is
+0; docs/BENCHMARKS.md gives both and what raising the cap changes);
 each frame's events, as a per-pixel count image, drive the visual SNN once at
 the frame's time (`spikejax.vision.edges.sync_step`, the paper's weights scaled
 to 20-pixel windows by `robots.hexapod.vision.vision_params`). The decision is
@@ -141,7 +142,8 @@ class Decision(NamedTuple):
             reaching the gait neurons one by one (`ordered_readout`).
         window_counts: layer-3 spikes, ``(8, 12, 2)``.
         events, filter_spikes, layer2_spikes: totals over the step.
-        overflow: events that did not fit in `capacity` (0 when all fit).
+        overflow: events beyond `capacity` a frame interval, summed: what an event list would drop (the
+            count image keeps them; 0 in every scene of the reproduction).
         clipped: threshold crossings beyond `MAX_PER_PIXEL` a pixel and frame
             interval, made into no event (`spikejax.vision.dvs.crossings`).
     """
@@ -201,9 +203,8 @@ def decide(
     def body(carry, inputs):
         dvs_state, snn, (overflow, clipped), (v_ord, t_ord, n_ord) = carry
         image, t, k = inputs
-        clip = jnp.sum(jnp.maximum(dvs.crossings(_DVS, dvs_state, image) - MAX_PER_PIXEL, 0))
-        dvs_state, events, lost = dvs.step(_DVS, dvs_state, image, t, capacity=cap, max_per_pixel=MAX_PER_PIXEL, key=k)
-        count = edges.count_image(config, events)
+        dvs_state, count, clip = dvs.step_counts(_DVS, dvs_state, image, t, max_per_pixel=MAX_PER_PIXEL, key=k)
+        beyond = jnp.maximum(jnp.sum(count) - cap, 0)
         snn, spikes = edges.sync_step(config, params, snn, count, t)
         n_in = jnp.sum(inputs_of & spikes.windows[None], axis=(1, 2, 3))
         touched = n_in > 0
@@ -211,7 +212,7 @@ def decide(
         fires, v_new = ordered_readout(v_leaked, n_in, w_out, params.v_th)
         ordered = (jnp.where(touched, v_new, v_ord), jnp.where(touched, t, t_ord), n_ord + fires)
         out = (count, spikes) if with_spikes else None
-        return (dvs_state, snn, (overflow + lost - clip, clipped + clip), ordered), out
+        return (dvs_state, snn, (overflow + beyond, clipped + clip), ordered), out
 
     keys = jax.random.split(k_steps, N_FRAMES - 1)
     zeros = jnp.zeros((config.n_out,), jnp.float32)
