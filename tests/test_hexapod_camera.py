@@ -18,11 +18,14 @@ def test_camera_sits_on_the_mjcf_site_above_the_standing_torso():
     qpos = physics.standing_state(model)[1 : 1 + model.nq]
     assert cam.site_offset() == pytest.approx((0.1, 0.0, 0.04))
     assert cam.camera_height() == pytest.approx(qpos[2] + 0.04, abs=1e-3)
-    # d_near = h / tan(tilt + atan(20 / f)), f = 128 / tan(30 deg): SPEC 4.4 at our sensor.
-    f = 128 / math.tan(math.radians(30))
+    # d_near = h / tan(tilt + atan(20 / f)), f = 128 / tan(HFoV / 2): SPEC 4.4 at our sensor.
+    f = 128 / math.tan(math.radians(cam.HFOV_DEG / 2))
     expected = cam.camera_height() / math.tan(math.radians(cam.TILT_DEG) + math.atan(20 / f))
     assert cam.D_NEAR == pytest.approx(expected, rel=1e-9)
-    assert cam.d_near(0.0) == pytest.approx(1.21, abs=0.01)  # SPEC 4.4's level example scaled to h = 0.109 m
+    assert (cam.HFOV_DEG, cam.TILT_DEG) == (90.0, 0.0) and cam.D_NEAR == pytest.approx(0.109 * 128 / 20, rel=1e-3)
+    narrow = render.Camera(width=256, height=160, fov=math.radians(60))
+    assert cam.d_near(0.0, narrow) == pytest.approx(1.21, abs=0.01)  # SPEC 4.4's level 60 deg example at h = 0.109 m
+    assert cam.d_near(10.0, narrow) == pytest.approx(0.40, abs=0.01)  # the first camera, 60 deg tilted 10 deg down
 
 
 def test_pose_follows_the_torso_yaw_and_the_tilt():

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from robots.hexapod import camera as cam
 from robots.hexapod import controllers
 from robots.hexapod import prey as prey_mod
 from robots.hexapod import reproduce_prey as rp
@@ -207,11 +208,14 @@ def test_gait_strings_and_edit_distance():
     assert rp.edit_distance("", "abc") == 3 and rp.edit_distance("kitten", "sitting") == 3
 
 
-def test_the_fig8_layout_puts_object_1_nearest_and_object_2_at_the_view_edge():
+def test_the_fig8_layout_puts_object_1_nearest_and_object_2_beyond_it_on_the_right():
     pose = jnp.asarray([0.1, 0.0, 0.0])  # the camera of the robot at the origin
     dist, bearing = prey_mod.relative(rp.FIG8_SCENE, pose)
     assert int(np.argmin(np.asarray(dist))) == 0
     assert -25 < math.degrees(float(bearing[0])) < -10 and -32 < math.degrees(float(bearing[1])) < -24
+    assert np.all(np.asarray(dist) > cam.D_NEAR + prey_mod.PREY_SIZE) and np.all(
+        rp.FIG8_SCENE.size == prey_mod.PREY_SIZE
+    )
 
 
 def test_a_bad_scene_file_is_one_line_before_any_work(tmp_path):

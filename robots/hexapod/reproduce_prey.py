@@ -51,14 +51,15 @@ Files in ``--out DIR``:
   oracle.
 
 **Fig. 8, our reading.** The paper gives no distances. In our units (G1 walks
-0.09 m a cycle, a turn 15 deg, the near boundary 0.45 m from the camera for a
-0.10 m cube), the torso's centre at the origin facing +x: object 1 at
-(0.69, -0.19) m, ahead and to the right, 0.62 m from the camera at -18 deg, so
-three forward steps bring it into the near rows on the right (F F F) and
-turns align it (R R); object 2 at (0.83, -0.38), 0.82 m at -28 deg (the edge
-of the 60 deg view), which after object 1's removal is near on the right two
-forward steps later (F F R); object 4 at (1.58, -0.49), beyond it and farther;
-object 3 at (1.20, 0.60), far on the left. The oracle walks this layout
+0.09 m a cycle, a turn 15 deg, the near boundary 0.715 m from the camera for
+the 0.03 m cube, `camera.D_NEAR` + half its edge), the torso's centre at the
+origin facing +x: object 1 at (0.95, -0.31) m, ahead and to the right, 0.90 m
+from the camera at -20 deg, so three forward steps bring it into the near rows
+on the right (F F F) and turns align it (R R); object 2 at (1.01, -0.53),
+1.05 m at -30 deg, which after object 1's removal is near on the right two
+forward steps later (F F R); object 4 at (1.86, -0.57), beyond it and farther;
+object 3 at (1.50, 0.90), far on the left. The distances were chosen by
+running the oracle over candidate layouts: it walks this one
 ``F F F R R | F F R`` on some robots and ``F F F R R | F F R R`` on others. The
 comparison stops at the second capture, as the paper's figure does. Energy spike counts: ``cpg`` is the 6 CPG neurons'
 spikes, ``drive`` the chosen gait-selection neuron's tonic spikes (one a CPG
@@ -144,10 +145,9 @@ _BATCH = 64
 
 
 def _fig8() -> prey_mod.PreyScene:
-    xy = np.array([[0.69, -0.19], [0.83, -0.38], [1.20, 0.60], [1.58, -0.49]], np.float32)
-    return prey_mod.PreyScene(
-        jnp.zeros(3, jnp.float32), jnp.asarray(xy), jnp.full((4,), 0.1, jnp.float32), jnp.ones((4,), bool)
-    )
+    xy = np.array([[0.95, -0.31], [1.01, -0.53], [1.50, 0.90], [1.86, -0.57]], np.float32)
+    size = jnp.full((4,), prey_mod.PREY_SIZE, jnp.float32)
+    return prey_mod.PreyScene(jnp.zeros(3, jnp.float32), jnp.asarray(xy), size, jnp.ones((4,), bool))
 
 
 FIG8_SCENE = _fig8()
