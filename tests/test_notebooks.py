@@ -56,3 +56,12 @@ def test_snake_pipe_notebook_executes(monkeypatch):
     outputs, text = _execute("snake_pipe.ipynb")
     assert _figures(outputs) >= 2  # path and estimates, events and grid
     assert "40 control steps (0.8 s simulated)" in text and "slots with a detection:" in text
+
+
+@pytest.mark.slow  # 22 s on an idle 2-core machine (kernel, the env's step compiled twice), above a fast test's 20 s
+def test_hexapod_prey_notebook_executes(monkeypatch):
+    monkeypatch.setenv("SPIKEJAX_NB_HEX_STEPS", "8")
+    outputs, text = _execute("hexapod_prey.ipynb", timeout=600)
+    assert _figures(outputs) >= 3  # paths, spikes and CPG raster, one decision inside
+    assert "oracle: 8 decisions" in text and "Fig. 8 gaits FFFRR" in text  # the oracle's first capture, as in the paper
+    assert "gait neurons' spikes over the step" in text
