@@ -76,7 +76,11 @@ episode's index into the pool is traced. The C engine runs inside the jitted
 step through ``jax.pure_callback`` with ``vmap_method="broadcast_all"`` (a
 vmapped batch reaches C as one ``mujoco.rollout`` call on a persistent thread
 pool), as the snake's `robots.snake.physics` does; what crosses is MuJoCo's
-full physics state in float32. The solver's warm start is not carried between
+full physics state in float32 (on one CPU device: `jax.pure_callback` moves a
+sharded batch's operands to the first CPU device, and two shards' callbacks at
+once deadlocked at batch 64, so this backend is not split with
+`spikejax.devices.shard_batch`; the C engine's threads use the cores). The
+solver's warm start is not carried between
 steps (it is not part of the state): each step starts it from zero.
 ``backend="mjx"`` steps the same pool with MJX inside the XLA program instead
 (`robots.hexapod.physics.mjx_stepper`: one program on an accelerator, no host
