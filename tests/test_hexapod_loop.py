@@ -233,7 +233,6 @@ def test_a_bad_scene_file_is_one_line_before_any_work(tmp_path):
     assert (args.scene, args.episodes, args.seconds, args.backend) == (str(bad), 3, 3.2, "mjx")
 
 
-@pytest.mark.slow
 def test_the_visual_snn_captures_more_often_than_random_gaits_on_the_same_scenes():
     # Prey 1.0-1.3 m ahead within 5 deg: the SNN walks on (G1 wins on far prey) and takes them; random gaits wander.
     env = HexapodEnv(n_robots=4, seconds=10 * STEP_S)
