@@ -191,10 +191,13 @@ def decide(
     """
     params = vision_params(config)
     cap = capacity(config)
-    images = frames(track, scene, cam.sensor_camera(config))
+    camera = cam.sensor_camera(config)
+    world = cam.prey_scene(scene)
+    poses = _to_scene_frame(jnp.asarray(track, jnp.float32), scene.start)
     times = jnp.arange(N_FRAMES, dtype=jnp.float32) * FRAME_S
     k_init, k_steps = jax.random.split(key)
-    dvs_state = dvs.init(_DVS, images[0], times[0], key=k_init)
+    # Each frame is rendered where the DVS takes it: 17 frames of a batch held at once would not stay in cache.
+    dvs_state = dvs.init(_DVS, cam.frame(poses[0], world, camera), times[0], key=k_init)
     snn = edges.init(config, times[0])
 
     w_out = jnp.max(params.readout, axis=(1, 2, 3))  # one weight a gait neuron (0.4, 0.7, 0.7)
@@ -202,7 +205,8 @@ def decide(
 
     def body(carry, inputs):
         dvs_state, snn, (overflow, clipped), (v_ord, t_ord, n_ord) = carry
-        image, t, k = inputs
+        pose, t, k = inputs
+        image = cam.frame(pose, world, camera)
         dvs_state, count, clip = dvs.step_counts(_DVS, dvs_state, image, t, max_per_pixel=MAX_PER_PIXEL, key=k)
         beyond = jnp.maximum(jnp.sum(count) - cap, 0)
         snn, spikes = edges.sync_step(config, params, snn, count, t)
@@ -219,7 +223,7 @@ def decide(
     ordered0 = (zeros, zeros + times[0], jnp.zeros((config.n_out,), jnp.int32))
     zero = jnp.zeros((), jnp.int32)
     (_, snn, (overflow, clipped), (_, _, n_ordered)), per_frame = jax.lax.scan(
-        body, (dvs_state, snn, (zero, zero), ordered0), (images[1:], times[1:], keys)
+        body, (dvs_state, snn, (zero, zero), ordered0), (poses[1:], times[1:], keys)
     )
     c = snn.counts
     decision = Decision(
