@@ -437,7 +437,7 @@ def run(
         rows,
         "vs_c_physics",
         "decisions_per_s",
-        lambda p, r: p["impl"].startswith("MuJoCo") and p["batch"] == r["batch"],
+        lambda p, r: p["impl"].startswith("MuJoCo") and p["batch"] == r["batch"] and not r["impl"].startswith("NumPy"),
     )
     add_ratios(rows, "x_numpy", "decisions_per_s", lambda p, r: p["impl"].startswith("NumPy"))
     print(
