@@ -38,7 +38,7 @@ from robots.snake.env import SNAKE_SPEED, SnakeEnv
 from robots.snake.rstdp import NetworkConfig, NetworkParams, controller, network_init
 from spikejax import rollout
 
-__all__ = ["BLOCK", "env_for", "lap_steps", "train", "test", "TrainResult", "TestTrace"]
+__all__ = ["BLOCK", "env_for", "lap_steps", "train", "test", "run_test", "TrainResult", "TestTrace"]
 
 BLOCK = 50  # control steps (1 s) per training record
 
@@ -91,7 +91,8 @@ def _members(env: SnakeEnv, config: NetworkConfig, params: NetworkParams, seeds,
         key = jax.random.PRNGKey(seed)
         k_net, k_loop = jax.random.split(key)
         state = env.restart(initial, initial, mirror)
-        return rollout.loop_init(state, network_init(config, params, key=k_net), key=k_loop)
+        net = None if config is None else network_init(config, params, key=k_net)
+        return rollout.loop_init(state, net, key=k_loop)
 
     return initial, jax.vmap(one)(
         jnp.asarray(seeds, jnp.uint32), jnp.broadcast_to(jnp.asarray(mirror, bool), (len(seeds),))
@@ -210,14 +211,24 @@ def test(
     import dataclasses
 
     config = dataclasses.replace(config, learn=False)
+    return run_test(controller(config), params, networks, track, steps, seeds=seeds)
+
+
+def run_test(ctrl, params, cstates, track: str | tracks.Track, steps: int | None = None, *, seeds) -> TestTrace:
+    """Any controller on one pass of ``track``, a failure restarting it: every control step recorded, per member.
+
+    ``ctrl`` is a `spikejax.rollout.Controller` whose ``out`` has ``d_body``
+    and ``d_head``; ``cstates`` its batched states, one member per seed (a
+    controller with nothing random ignores the seed's key). A lone member runs
+    as a batch of two copies (see the module docstring).
+    """
     env = env_for(track)
     steps = lap_steps(env) if steps is None else steps
     seeds, n = _padded(seeds)
     if n == 1:
-        networks = jax.tree.map(lambda x: jnp.concatenate([x, x]), networks)
-    initial, loop = _members(env, config, params, seeds, False)
-    loop = loop._replace(controller=networks)
-    ctrl = controller(config)
+        cstates = jax.tree.map(lambda x: jnp.concatenate([x, x]), cstates)
+    initial, loop = _members(env, None, None, seeds, False)
+    loop = loop._replace(controller=cstates)
 
     def reset(state, failed, completed, *, key):
         return env.restart(initial, state, state.info["mirror"])
