@@ -143,6 +143,7 @@ def train_one(
 ) -> dict:
     """Train (or go on training) one policy into ``out``; returns its ``policy.json`` description."""
     the_task = ppo.make_task(task, observation, backend=backend)
+    evals = max(1, min(int(evals), -(-int(steps) // settings.steps_per_update)))  # no more tenths than updates
     meta = {
         "task": task,
         "observation": observation,
@@ -172,12 +173,15 @@ def train_one(
         if n > 0 or restore is None:
             _save_policy(out, {**meta, "env_steps": done_steps + int(n)}, params)
 
+    shown = [done_steps]
+
     def on_metrics(n, metrics):
         row = _curve_row(done_steps + n, wall0 + time.time() - t0, metrics, dt)
         if row is not None:
             curve.append(row)
             write_csv(out / "ppo_training.csv", curve, CURVE_HEADER)
-        if progress and row is not None:
+        if progress and row is not None and row["env_steps"] >= shown[0] + steps / 10:  # about ten lines
+            shown[0] = row["env_steps"]
             print(
                 f"  {row['env_steps']:>10,} steps  reward/step {row['reward_per_step']:.3f}  "
                 f"|a_head| {row['abs_head_deg']:.1f} deg  episodes {row['episode_length_s']:.0f} s  "

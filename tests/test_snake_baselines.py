@@ -1,0 +1,51 @@
+"""``reproduce snake-baselines``: the scripted controller through the common test, and the whole command at small size."""
+
+from __future__ import annotations
+
+import csv
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from robots.snake import env as snake_env
+from robots.snake import steering, training
+from robots.snake.reproduce_baselines import HEADER, run, scripted_controller
+
+
+def test_the_scripted_controller_in_the_common_test_steers_on_the_angle_it_saw():
+    """Each step's action is `steering.step` of the body angle the last step left (the trace's own record).
+
+    Against `robots.snake.env.rollout` driving the same controller, the head
+    angles agree bit for bit for the first seven steps, then part by float
+    rounding (the two programs round an action's last bit differently, and
+    the closed loop amplifies it): the head within 2 cm over 3 s.
+    """
+    env = training.env_for("zigzag")
+    states = jax.tree.map(lambda x: jnp.stack([x]), steering.init())
+    trace = training.run_test(scripted_controller(env.dt), None, states, "zigzag", 150, seeds=np.arange(1))
+    gains = steering.SteeringParams()
+    seen = trace.a_body[0, :-1]
+    np.testing.assert_allclose(trace.d_body[0, 1:], np.clip(gains.gain * seen, -1, 1), atol=1e-6)
+    np.testing.assert_allclose(trace.d_head[0, 1:], np.clip(gains.head_gain * seen, -1, 1), atol=1e-6)
+    assert not trace.failed.any()
+
+    def policy(state, obs, _):
+        return steering.step(gains, state, obs, env.dt)
+
+    record, _ = jax.jit(lambda: snake_env.rollout(env, policy, steering.init(), 150))()
+    head = np.asarray(record.pipeline_state.head_pos[:, :2])
+    assert np.abs(trace.head_xy[0] - head).max() < 0.02
+
+
+@pytest.mark.slow  # ~3 min
+def test_reproduce_snake_baselines_small(tmp_path):
+    rows = run(tmp_path, seeds=2, ppo_steps=2_560, train_laps=0.01, test_steps=100, progress=False)
+    with open(tmp_path / "snake_baselines.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    assert list(table[0]) == HEADER and len(table) == len(rows)
+    controllers = {r["topology"] for r in table}
+    assert controllers == {"scripted", "ppo-grid", "ppo-angles", "basic", "basic-head", "unified", "separated"}
+    assert {r["seeds"] for r in table if r["topology"] != "scripted"} == {"2"}
+    assert (tmp_path / "snake_baselines.png").exists()
