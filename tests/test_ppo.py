@@ -12,7 +12,7 @@ import pytest
 from brax.envs.wrappers import training as brax_wrappers
 
 from robots.snake import ppo, training
-from robots.snake.ppo_commands import evaluate_rows, load_policy, train_one
+from robots.snake.reproduce_ppo import evaluate_rows, load_policy, train_one
 from spikejax import coding
 from spikejax.errors import UserError
 

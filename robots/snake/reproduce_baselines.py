@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from robots.snake import metrics, reproduce_rstdp, rstdp, steering, training
-from robots.snake.ppo_commands import evaluate_rows, train_one
+from robots.snake.reproduce_ppo import evaluate_rows, train_one
 from spikejax.benchmarking import write_csv
 from spikejax.commands import Command, add_common, count, output_directory
 from spikejax.errors import UserError
