@@ -6,7 +6,7 @@
 For each observation variant and number of envs, one after the other: PPO's
 steady training rate (env steps between its first and last logged update over
 the wall time between them, so compilation and the first update are left
-out), and the env alone at the same batch (`robots.snake.ppo.TrackTask`'s
+out; three epochs of ``updates / 3`` updates each, the first not timed), and the env alone at the same batch (`robots.snake.ppo.TrackTask`'s
 ``step`` in a jitted, vmapped ``lax.scan`` of zero actions, compile apart),
 so ``ppo_share`` = ``1 - ppo / env`` is what learning costs. Writes
 ``DIR/ppo_throughput.csv``.
@@ -35,7 +35,7 @@ def ppo_rate(task, envs: int, updates: int) -> tuple[float, float]:
         task,
         updates * settings.steps_per_update,
         settings=settings,
-        evals=updates,
+        evals=3,  # several updates an epoch: Brax's per-epoch work is not timed as training
         on_params=lambda n, p: marks.append((n, time.perf_counter())),
     )
     (n0, t_first), (n1, t_last) = marks[1], marks[-1]
