@@ -143,3 +143,23 @@ def test_brax_ppo_trains_a_few_iterations_on_either_backend(backend):
     assert all(np.isfinite(np.asarray(x)).all() for x in last)
     assert any(not np.array_equal(np.asarray(a), np.asarray(b)) for a, b in zip(first, last))
     assert not np.allclose(np.asarray(seen[80][0].mean), np.asarray(seen[0][0].mean))  # observations normalised
+
+
+def test_the_pipe_task_starts_each_auto_reset_episode_with_an_empty_detector():
+    task = ppo.make_task("snake-pipe", "truth")
+    env = brax_wrappers.wrap(task, episode_length=3)
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), 2))
+    step = jax.jit(env.step)
+    for _ in range(3):
+        state = step(state, jnp.zeros((2, 2)))
+    assert np.asarray(state.done).all() and np.asarray(state.info["control_steps"]).tolist() == [3, 3]
+    # a latched outcome of the old episode must not leak into the next one
+    state.info["success"] = jnp.ones((2,), bool)
+    state = step(state, jnp.zeros((2, 2)))
+    assert np.asarray(state.info["control_steps"]).tolist() == [1, 1]
+    assert not np.asarray(state.info["success"]).any()
+    m = state.metrics
+    np.testing.assert_allclose(np.asarray(state.obs[:, :3]), np.stack([m["depth"], m["lateral"], m["offset_true"]], 1))
+    assert state.obs.shape == (2, task.observation_size) == (2, 35)
+    with pytest.raises(UserError, match="for snake-pipe"):
+        ppo.make_task("snake-pipe", "grid")

@@ -60,14 +60,17 @@ __all__ = [
     "TASKS",
     "PPOSettings",
     "TrackTask",
+    "PipeTask",
+    "PIPE_OBSERVATIONS",
     "make_task",
     "make_networks",
     "policy_controller",
     "train",
 ]
 
-TASKS = ("snake-track",)
-OBSERVATIONS = ("grid", "angles")
+TASKS = ("snake-track", "snake-pipe")
+OBSERVATIONS = ("grid", "angles")  # snake-track's; snake-pipe's are PIPE_OBSERVATIONS
+PIPE_OBSERVATIONS = ("detector", "truth")
 MAX_RATE = 300.0  # Hz, the cap of Eq. (2)'s rates in robots.snake.rstdp.network_params
 
 
@@ -133,12 +136,88 @@ class TrackTask(Wrapper):
         return state.replace(obs=self.observe(state), reward=reward, done=done, metrics=metrics)
 
 
-def make_task(task: str, observation: str, *, backend: str = "mujoco", track="eight") -> TrackTask:
-    """``task`` (one of `TASKS`) with ``observation`` on ``backend``; the env of the spiking networks' training."""
+def make_task(task: str, observation: str, *, backend: str = "mujoco", track="eight", situation="standing-right"):
+    """``task`` (one of `TASKS`) with ``observation`` on ``backend``.
+
+    ``snake-track``: `TrackTask` on the env of the spiking networks' training
+    (``track``); ``snake-pipe``: `PipeTask` in ``situation`` (one of
+    `robots.snake.pipes.SITUATIONS`).
+    """
     if task not in TASKS:
         raise UserError(f"unknown task {task!r}; choose from {', '.join(TASKS)}")
+    if task == "snake-pipe":
+        from robots.snake.pipe_env import PipeEnv
+
+        if observation not in PIPE_OBSERVATIONS:
+            raise UserError(f"unknown observation {observation!r} for snake-pipe; choose from detector, truth")
+        return PipeTask(PipeEnv(backend, situation=situation), observation)
     env = training.env_for(track, backend=backend, camera=observation == "grid")
     return TrackTask(env, observation)
+
+
+class PipeTask(Wrapper):
+    """The pipe paper's approach (`robots.snake.pipe_env.PipeEnv`) for Brax's trainers.
+
+    Observations: ``"detector"``, what the bang-bang controller of the snake
+    pipe-tracking paper reads, Alg. 3's last distance and offset estimates
+    (held between slot ends, 0 before the first), whether the last slot saw a
+    body and an entry, and the control ``C`` in force, then the env's 32 joint
+    angles and velocities; ``"truth"``, the privileged bound: the target
+    pipe's true depth and lateral position in the camera frame and its offset
+    from the central line, then the same 32. Actions: ``action[0]`` steers
+    (``action[1]`` is ignored, as in the env). Reward and episode ends are the
+    env's (progress towards the pipe plus 1 at success; success, a collision
+    with a standing pipe, ``max_steps``).
+
+    The env keeps the detector, the latched outcomes and the step count in
+    ``info``, which Brax's ``AutoResetWrapper`` does not reset (it puts back
+    the first physics state and observation only); `PipeTask` keeps the
+    reset's ``info`` and puts it back at the first step from time 0, so every
+    episode starts with an empty detector. Each env therefore replays the
+    placement its first reset sampled: ``num_envs`` placements in a training.
+    """
+
+    def __init__(self, env, observation: str = "detector"):
+        if observation not in PIPE_OBSERVATIONS:
+            raise UserError(f"unknown observation {observation!r}; choose from {', '.join(PIPE_OBSERVATIONS)}")
+        super().__init__(env)
+        self.observation = observation
+
+    @property
+    def observation_size(self) -> int:
+        return (5 if self.observation == "detector" else 3) + 32
+
+    @property
+    def action_size(self) -> int:
+        return 2
+
+    def observe(self, state: State) -> jax.Array:
+        """The policy's input from a `PipeEnv` state, for one snake."""
+        if self.observation == "truth":
+            m = state.metrics
+            head = jnp.stack([m["depth"], m["lateral"], m["offset_true"]])
+        else:
+            info, slot = state.info, state.info["slot"]
+            f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+            head = jnp.stack(
+                [info["d_est"], info["offset_est"], f32(slot.body.valid), f32(slot.entry.valid), f32(slot.control)]
+            )
+        return jnp.concatenate([head.astype(jnp.float32), state.obs])
+
+    def reset(self, rng: jax.Array) -> State:
+        state = self.env.reset(rng)
+        state.info["first_info"] = dict(state.info)
+        return state.replace(obs=self.observe(state), metrics={**state.metrics, "succeeded": jnp.zeros(())})
+
+    def step(self, state: State, action: jax.Array) -> State:
+        info = state.info
+        fresh = (state.pipeline_state.time == 0.0) & (info["control_steps"] > 0)
+        first = info["first_info"]
+        restored = jax.tree.map(lambda a, b: jnp.where(fresh, a, b), first, {k: info[k] for k in first})
+        state = state.replace(info={**info, **restored})
+        state = self.env.step(state, action)
+        metrics = {**state.metrics, "succeeded": state.metrics["success"] * state.done}
+        return state.replace(obs=self.observe(state), metrics=metrics)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,7 +230,8 @@ class PPOSettings:
     period), 4 minibatches of 64 x 20 steps and 4 passes over each batch,
     observations normalised by Brax's running statistics, a discount of 0.97
     (a horizon of about 30 steps, 0.6 s). ``episode_length`` ``None`` is one
-    pass of the 8 at the snake's straight speed (`robots.snake.training.lap_steps`).
+    pass of the 8 at the snake's straight speed (`robots.snake.training.lap_steps`)
+    on ``snake-track``, the env's ``max_steps`` on ``snake-pipe``.
     """
 
     num_envs: int = 64
@@ -240,7 +320,9 @@ def train(
     if steps < 1:
         raise UserError(f"steps must be at least 1, got {steps}")
     fields = dataclasses.asdict(settings)
-    episode_length = fields.pop("episode_length") or training.lap_steps(task.env)
+    episode_length = fields.pop("episode_length") or (
+        training.lap_steps(task.env) if isinstance(task, TrackTask) else task.env.max_steps
+    )
     with _brax_on_this_jax():
         _, params, _ = ppo.train(
             task,

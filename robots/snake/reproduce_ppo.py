@@ -1,6 +1,7 @@
 """``spikejax train ppo`` and ``spikejax evaluate ppo``: Brax's PPO on the snake's tracking task, saved and tested.
 
-``train ppo snake-track --out DIR`` runs `robots.snake.ppo.train` and writes, in ``DIR``:
+``train ppo snake-track --out DIR`` (or ``snake-pipe``, the pipe paper's
+approach in ``--situation``) runs `robots.snake.ppo.train` and writes, in ``DIR``:
 
 * ``policy.params``: the policy in Brax's parameter format (a pickle of
   ``(normalizer, policy, value)``, `brax.io.model.load_params` reads it),
@@ -21,7 +22,10 @@ saved policies (deterministic actions, the mode of Brax's tanh-normal) on one
 pass of a track with `robots.snake.training.run_test`, the spiking networks'
 test, and writes ``snake_ppo.csv`` with the columns of ``snake_rstdp.csv``
 (`robots.snake.reproduce_rstdp.HEADER`; one row per observation variant and
-metric window, intervals over the policies given, each a seed).
+metric window, intervals over the policies given, each a seed). For
+``snake-pipe`` policies it runs ``--episodes`` placements of ``--situation``
+instead and writes ``snake_ppo_pipe.csv`` (the share of successes with a
+Wilson interval, collisions, the mean time to success).
 """
 
 from __future__ import annotations
@@ -48,10 +52,11 @@ CURVE_HEADER = [
     "env_steps",
     "wall_s",
     "reward_per_step",
-    "abs_head_deg",
     "episode_length_s",
+    "abs_head_deg",
     "failed_share",
     "failures_per_min",
+    "success_share",
 ]
 
 
@@ -65,7 +70,7 @@ def load_policy(path: Path) -> tuple[dict, tuple]:
         params = model.load_params(str(path / "policy.params"))
     except (OSError, ValueError, EOFError, pickle.UnpicklingError) as e:
         raise UserError(f"{path}: not a saved PPO policy ({e.__class__.__name__}: {e})") from None
-    if meta.get("task") not in ppo.TASKS or meta.get("observation") not in ppo.OBSERVATIONS:
+    if meta.get("task") not in ppo.TASKS or meta.get("observation") not in ppo.OBSERVATIONS + ppo.PIPE_OBSERVATIONS:
         raise UserError(f"{path}: policy.json names no known task and observation")
     return meta, params
 
@@ -82,19 +87,24 @@ def _save_policy(out: Path, meta: dict, params) -> None:
 
 
 def _curve_row(env_steps: int, wall: float, metrics: dict, dt: float) -> dict | None:
+    """One row of the training curve from Brax's episode metrics (tracking: failures; pipe: successes)."""
     length = float(metrics.get("episode/length", 0.0))
     if length <= 0:
         return None
-    failed = float(metrics["episode/failed"])
-    return {
+    row = {
         "env_steps": int(env_steps),
         "wall_s": round(wall, 2),
         "reward_per_step": round(float(metrics["episode/sum_reward"]) / length, 5),
-        "abs_head_deg": round(float(np.degrees(float(metrics["episode/abs_head"]) / length)), 4),
         "episode_length_s": round(length * dt, 3),
-        "failed_share": round(failed, 4),
-        "failures_per_min": round(ppo.failures_per_minute(failed, length, dt), 4),
     }
+    if "episode/failed" in metrics:
+        failed = float(metrics["episode/failed"])
+        row["abs_head_deg"] = round(float(np.degrees(float(metrics["episode/abs_head"]) / length)), 4)
+        row["failed_share"] = round(failed, 4)
+        row["failures_per_min"] = round(ppo.failures_per_minute(failed, length, dt), 4)
+    if "episode/succeeded" in metrics:
+        row["success_share"] = round(float(metrics["episode/succeeded"]), 4)
+    return row
 
 
 def _read_curve(path: Path) -> list[dict]:
@@ -113,12 +123,19 @@ def _plot_curve(path: Path, rows: list[dict], title: str) -> None:
     import matplotlib.pyplot as plt
 
     x = np.array([float(r["env_steps"]) for r in rows])
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
-    for ax, key, label in zip(
-        axes,
-        ("reward_per_step", "abs_head_deg", "failures_per_min"),
-        ("reward per step", "mean |a_head| (deg)", "failures / min"),
-    ):
+    panels = [
+        (k, label)
+        for k, label in (
+            ("reward_per_step", "reward per step"),
+            ("abs_head_deg", "mean |a_head| (deg)"),
+            ("failures_per_min", "failures / min"),
+            ("success_share", "episodes ending in success"),
+            ("episode_length_s", "episode length (s)"),
+        )
+        if rows[0].get(k) not in (None, "")
+    ][:3]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 3.2))
+    for ax, (key, label) in zip(np.atleast_1d(axes), panels):
         ax.plot(x, [float(r[key]) for r in rows], "o-", ms=3)
         ax.set_xlabel("env steps")
         ax.set_ylabel(label)
@@ -137,18 +154,20 @@ def train_one(
     steps: int,
     seed: int,
     backend: str = "mujoco",
+    situation: str = "standing-right",
     settings: ppo.PPOSettings = ppo.PPOSettings(),
     evals: int = 10,
     progress: bool = True,
 ) -> dict:
     """Train (or go on training) one policy into ``out``; returns its ``policy.json`` description."""
-    the_task = ppo.make_task(task, observation, backend=backend)
+    the_task = ppo.make_task(task, observation, backend=backend, situation=situation)
     evals = max(1, min(int(evals), -(-int(steps) // settings.steps_per_update)))  # no more tenths than updates
     meta = {
         "task": task,
         "observation": observation,
         "seed": int(seed),
         "backend": backend,
+        "situation": situation if task == "snake-pipe" else None,
         "settings": dataclasses.asdict(settings),
         "target_steps": int(steps),
         "env_steps": 0,
@@ -156,7 +175,7 @@ def train_one(
     restore, done_steps = None, 0
     if (out / "policy.json").exists():
         old, old_params = load_policy(out)
-        same = {k: old.get(k) for k in ("task", "observation", "seed", "settings")}
+        same = {k: old.get(k) for k in ("task", "observation", "seed", "situation", "settings")}
         if same != {k: meta[k] for k in same}:
             raise UserError(
                 f"{out} holds another training ({old['observation']}, seed {old['seed']}); use another --out"
@@ -182,10 +201,14 @@ def train_one(
             write_csv(out / "ppo_training.csv", curve, CURVE_HEADER)
         if progress and row is not None and row["env_steps"] >= shown[0] + steps / 10:  # about ten lines
             shown[0] = row["env_steps"]
+            task_part = (
+                f"|a_head| {row['abs_head_deg']:.1f} deg  failures/min {row['failures_per_min']:.2f}"
+                if "abs_head_deg" in row
+                else f"success {row['success_share']:.2f}"
+            )
             print(
                 f"  {row['env_steps']:>10,} steps  reward/step {row['reward_per_step']:.3f}  "
-                f"|a_head| {row['abs_head_deg']:.1f} deg  episodes {row['episode_length_s']:.0f} s  "
-                f"failures/min {row['failures_per_min']:.2f}  ({row['wall_s']:.0f} s)",
+                f"episodes {row['episode_length_s']:.0f} s  {task_part}  ({row['wall_s']:.0f} s)",
                 flush=True,
             )
 
@@ -207,21 +230,31 @@ def train_one(
 
 def _add_train_arguments(parser) -> None:
     add_common(parser)
-    parser.add_argument("task", choices=ppo.TASKS, help="the task (the snake R-STDP paper's: the 8, mirrored)")
+    parser.add_argument(
+        "task", choices=ppo.TASKS, help="snake-track (the R-STDP paper's 8, mirrored) or snake-pipe (the pipe paper's)"
+    )
     parser.add_argument(
         "--observation",
-        choices=ppo.OBSERVATIONS,
-        default="grid",
-        help="grid: the DVS grid rates and joint angles the spiking nets see (default); angles: the true target angles",
+        choices=ppo.OBSERVATIONS + ppo.PIPE_OBSERVATIONS,
+        default=None,
+        help="snake-track: grid (the DVS grid rates and joint angles the spiking nets see, default) or angles (the "
+        "true target angles); snake-pipe: detector (Alg. 3's estimates, default) or truth",
     )
+    parser.add_argument("--situation", default="standing-right", help="snake-pipe's situation (default standing-right)")
     parser.add_argument("--steps", type=count, default=1_000_000, help="env steps (default 1,000,000)")
     parser.add_argument("--seed", type=count_or_zero, default=0, help="the trainer's seed (default 0)")
     parser.add_argument("--backend", choices=BACKENDS, default="mujoco", help="physics backend (default mujoco)")
     parser.add_argument("--envs", type=count, default=ppo.PPOSettings.num_envs, help="parallel envs (default 64)")
 
 
-def run_train(*, out, task, observation, steps, seed, backend, envs, no_progress) -> int:
+def run_train(*, out, task, observation, situation, steps, seed, backend, envs, no_progress) -> int:
     """``spikejax train ppo TASK --out DIR``."""
+    from robots.snake.pipes import SITUATIONS
+
+    if observation is None:
+        observation = "grid" if task == "snake-track" else "detector"
+    if situation not in SITUATIONS:
+        raise UserError(f"--situation must be one of {', '.join(SITUATIONS)}, not {situation!r}")
     defaults = ppo.PPOSettings()
     settings = dataclasses.replace(defaults, num_envs=envs, batch_size=max(envs, defaults.batch_size))
     with output_directory(out, command="train ppo") as out:
@@ -232,6 +265,7 @@ def run_train(*, out, task, observation, steps, seed, backend, envs, no_progress
             steps=steps,
             seed=seed,
             backend=backend,
+            situation=situation,
             settings=settings,
             progress=not no_progress,
         )
@@ -261,26 +295,112 @@ def evaluate_rows(policies: list[Path], track, name: str, steps: int | None) -> 
     return rows
 
 
+PIPE_HEADER = [
+    "policy",
+    "situation",
+    "seeds",
+    "episodes",
+    "success",
+    "success_ci_low",
+    "success_ci_high",
+    "collided",
+    "mean_time_to_success_s",
+]
+
+
+def pipe_rows(policies: list[Path], situation: str, episodes: int) -> list[list]:
+    """Rows of ``snake_ppo_pipe.csv``: each variant's policies over ``episodes`` placements of ``situation``.
+
+    Placement ``i`` is `robots.snake.pipe_env.PipeEnv`'s sample from
+    ``jax.random.PRNGKey(i)``, the same for every policy; an episode runs the
+    env's ``max_steps`` with deterministic actions and counts as a success if
+    the env's latched outcome is, at any step.
+    """
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from spikejax.stats import wilson_interval
+
+    loaded = [load_policy(p) for p in policies]
+    rows = []
+    for observation in ppo.PIPE_OBSERVATIONS:
+        group = [(m, p) for m, p in loaded if m["observation"] == observation and m["task"] == "snake-pipe"]
+        if not group:
+            continue
+        settings = ppo.PPOSettings(**group[0][0]["settings"])
+        task = ppo.make_task("snake-pipe", observation, situation=situation)
+        make_policy = ppo_networks.make_inference_fn(ppo.make_networks(task, settings))
+        stacked = jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *[p[:2] for _, p in group])
+
+        def episode(params, key):
+            policy = make_policy(params, deterministic=True)
+
+            def body(state, _):
+                action, _ = policy(state.obs, key)
+                return task.step(state, action), None
+
+            state, _ = jax.lax.scan(body, task.reset(key), None, length=task.env.max_steps)
+            return state.info["success"], state.info["collided"], state.info["success_step"]
+
+        keys = jnp.stack([jax.random.PRNGKey(i) for i in range(episodes)])
+        run = jax.jit(jax.vmap(lambda p: jax.vmap(lambda k: episode(p, k))(keys)))
+        success, collided, step = (np.asarray(x) for x in run(stacked))
+        n, wins = success.size, int(success.sum())
+        lo, hi = wilson_interval(wins, n)
+        times = step[success] * task.env.dt
+        rows.append(
+            [
+                f"ppo-{observation}",
+                situation,
+                len(group),
+                episodes,
+                round(wins / n, 4),
+                round(float(lo), 4),
+                round(float(hi), 4),
+                round(float(collided.mean()), 4),
+                round(float(times.mean()), 2) if wins else "",
+            ]
+        )
+    return rows
+
+
 def _add_evaluate_arguments(parser) -> None:
     add_common(parser)
     parser.add_argument("--policy", nargs="+", required=True, help="train ppo output directories (one a seed)")
     parser.add_argument(
-        "--track", required=True, help=f"a track name ({', '.join(tracks.TRACKS)}) or a CSV of x, y waypoints"
+        "--track", help=f"snake-track policies: a track name ({', '.join(tracks.TRACKS)}) or a CSV of x, y waypoints"
     )
     parser.add_argument("--steps", type=count, default=None, help="control steps (default: one pass of the track)")
+    parser.add_argument("--situation", default=None, help="snake-pipe policies: the situation (default: trained)")
+    parser.add_argument("--episodes", type=count, default=64, help="snake-pipe policies: placements (default 64)")
 
 
-def run_evaluate(*, out, policy, track, steps, no_progress) -> int:
-    """``spikejax evaluate ppo --policy DIR ... --track NAME|FILE --out DIR``."""
+def run_evaluate(*, out, policy, track, steps, situation, episodes, no_progress) -> int:
+    """``spikejax evaluate ppo --policy DIR ... (--track NAME|FILE | --situation S) --out DIR``."""
     from robots.snake.reproduce_rstdp import HEADER, _print
 
+    paths = [Path(p) for p in policy]
+    metas = [load_policy(p)[0] for p in paths]
+    if {m["task"] for m in metas} == {"snake-pipe"}:
+        from robots.snake.pipes import SITUATIONS
+
+        situation = situation or metas[0]["situation"]
+        if situation not in SITUATIONS:
+            raise UserError(f"--situation must be one of {', '.join(SITUATIONS)}, not {situation!r}")
+        with output_directory(out, command="evaluate ppo") as out:
+            rows = pipe_rows(paths, situation, episodes)
+            write_csv(out / "snake_ppo_pipe.csv", [dict(zip(PIPE_HEADER, r)) for r in rows], PIPE_HEADER)
+            for r in rows:
+                print(f"{r[0]:<13} {r[1]}: success {r[4]:.2f} [{r[5]:.2f}, {r[6]:.2f}] over {r[3]} placements")
+            print(f"wrote {out}/snake_ppo_pipe.csv")
+        return 0
+    if len({m["task"] for m in metas}) > 1:
+        raise UserError("--policy: give policies of one task (snake-track or snake-pipe) at a time")
+    if track is None:
+        raise UserError("--track is needed for snake-track policies")
     if track in tracks.TRACKS:
         the_track, name = track, track
     else:
         the_track, name = tracks.load_waypoints(track), Path(track).name
-    paths = [Path(p) for p in policy]
-    for p in paths:
-        load_policy(p)
     with output_directory(out, command="evaluate ppo") as out:
         rows = evaluate_rows(paths, the_track, name, steps)
         write_csv(out / "snake_ppo.csv", [dict(zip(HEADER, r)) for r in rows], HEADER)
