@@ -9,9 +9,9 @@ approach in ``--situation``) runs `robots.snake.ppo.train` and writes, in ``DIR`
   latest policy; ``policy.json``: the task, observation, seed, backend, the
   `robots.snake.ppo.PPOSettings` and the env steps done;
 * ``ppo_training.csv`` and ``ppo_training.png``: the training curve, reward
-  per step, mean ``|a_head|``, episode length and failures a minute against
-  env steps (Brax's training metrics of the episodes that ended in each
-  tenth).
+  per step, episode length, and mean ``|a_head|`` and failures a minute
+  (tracking) or the share of episodes ending in success (pipe), against env
+  steps (Brax's training metrics of the episodes that ended in each update).
 
 A run started again in the same ``DIR`` goes on from its saved policy for the
 steps still missing (the optimiser's moments start afresh, so the result
