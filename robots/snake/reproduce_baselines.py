@@ -86,8 +86,7 @@ def run(
             dirs.append(d)
         for name in reproduce_rstdp.TEST_TRACKS:
             rows += [r + [meta["env_steps"]] for r in evaluate_rows(dirs, name, name, test_steps)]
-    env = training.env_for("eight")
-    steps = int(np.ceil(train_laps * training.lap_steps(env) / training.BLOCK) * training.BLOCK)
+    steps, _ = reproduce_rstdp.training_steps(training.env_for("eight"), train_laps)
     rstdp_rows = reproduce_rstdp.run(
         out / "rstdp",
         seeds=seeds,

@@ -186,6 +186,13 @@ def _progress_bar(desc: str, total: int, enabled: bool):
     return update
 
 
+def training_steps(env, train_laps: float, chunk_steps: int | None = None) -> tuple[int, int]:
+    """Control steps of a training of ``train_laps`` passes of the 8 (whole blocks, whole chunks), and the chunk."""
+    steps = int(np.ceil(train_laps * training.lap_steps(env) / training.BLOCK) * training.BLOCK)
+    chunk = min(steps, chunk_steps or 20 * training.BLOCK)
+    return int(np.ceil(steps / chunk) * chunk), chunk
+
+
 def run(
     out: Path,
     *,
@@ -203,9 +210,7 @@ def run(
     (out / "tests").mkdir(exist_ok=True)
     seed_list = np.arange(seeds)
     env = training.env_for("eight")
-    steps = int(np.ceil(train_laps * training.lap_steps(env) / training.BLOCK) * training.BLOCK)
-    chunk = min(steps, chunk_steps or 20 * training.BLOCK)
-    steps = int(np.ceil(steps / chunk) * chunk)
+    steps, chunk = training_steps(env, train_laps, chunk_steps)
     rows, traces, train_records = [], {}, {}
     for topology in topologies:
         config, t0 = _config(topology), time.time()
