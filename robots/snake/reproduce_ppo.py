@@ -75,6 +75,11 @@ def load_policy(path: Path) -> tuple[dict, tuple]:
     return meta, params
 
 
+def _stacked(params: list[tuple]) -> tuple:
+    """The ``(normalizer, policy)`` parts of several policies' parameters, stacked along a new leading axis."""
+    return jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *[p[:2] for p in params])
+
+
 def _save_policy(out: Path, meta: dict, params) -> None:
     from brax.io import model
 
@@ -286,7 +291,7 @@ def evaluate_rows(policies: list[Path], track, name: str, steps: int | None) -> 
         settings = ppo.PPOSettings(**group[0][0]["settings"])
         task = ppo.make_task(group[0][0]["task"], observation)
         ctrl = ppo.policy_controller(task, settings)
-        stacked = jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *[p[:2] for _, p in group])
+        stacked = _stacked([p for _, p in group])
         seeds = np.array([m["seed"] for m, _ in group])
         trace = training.run_test(ctrl, None, stacked, track, steps, seeds=seeds)
         env = training.env_for(track)
@@ -329,7 +334,7 @@ def pipe_rows(policies: list[Path], situation: str, episodes: int) -> list[list]
         settings = ppo.PPOSettings(**group[0][0]["settings"])
         task = ppo.make_task("snake-pipe", observation, situation=situation)
         make_policy = ppo_networks.make_inference_fn(ppo.make_networks(task, settings))
-        stacked = jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *[p[:2] for _, p in group])
+        stacked = _stacked([p for _, p in group])
 
         def episode(params, key):
             policy = make_policy(params, deterministic=True)
@@ -397,10 +402,7 @@ def run_evaluate(*, out, policy, track, steps, situation, episodes, no_progress)
         raise UserError("--policy: give policies of one task (snake-track or snake-pipe) at a time")
     if track is None:
         raise UserError("--track is needed for snake-track policies")
-    if track in tracks.TRACKS:
-        the_track, name = track, track
-    else:
-        the_track, name = tracks.load_waypoints(track), Path(track).name
+    the_track, name = tracks.from_argument(track)
     with output_directory(out, command="evaluate ppo") as out:
         rows = evaluate_rows(paths, the_track, name, steps)
         write_csv(out / "snake_ppo.csv", [dict(zip(HEADER, r)) for r in rows], HEADER)

@@ -508,10 +508,7 @@ def run_evaluate(*, out, weights, track, steps, no_progress) -> int:
     files = sorted((path / "weights").glob("*.npz")) if path.is_dir() else [path]
     if not files or not all(f.is_file() for f in files):
         raise UserError(f"--weights {weights}: no weights files found (expected DIR/weights/TOPOLOGY.npz or a .npz)")
-    if track in tracks.TRACKS:
-        the_track, name = track, track
-    else:
-        the_track, name = tracks.load_waypoints(track), Path(track).name
+    the_track, name = tracks.from_argument(track)
     env = training.env_for(the_track)
     with output_directory(out, command="evaluate snake-rstdp") as out:
         rows = []

@@ -208,6 +208,15 @@ def load_waypoints(path) -> Track:
         raise UserError(f"{path}: {e}") from None
 
 
+def from_argument(text: str) -> tuple[str | Track, str]:
+    """A ``--track`` argument: one of `TRACKS` (kept as its name) or a waypoints CSV (`load_waypoints`), and its label."""
+    if text in TRACKS:
+        return text, text
+    import pathlib
+
+    return load_waypoints(text), pathlib.Path(text).name
+
+
 def mirror(track: Track) -> Track:
     """The mirror image about the x axis, ``(x, y) -> (x, -y)``."""
     return track._replace(
