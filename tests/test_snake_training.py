@@ -93,6 +93,17 @@ def test_reproduce_refuses_bad_flags_in_one_line(tmp_path, flag, value, words):
     assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+def test_reproduce_refuses_weights_of_another_training(tmp_path):
+    from robots.snake import reproduce_rstdp
+    from spikejax.errors import UserError
+
+    (tmp_path / "weights").mkdir()
+    w = np.zeros((2, 10, 2), np.float32)
+    np.savez(tmp_path / "weights" / "basic.npz", topology="basic", seeds=np.arange(2), w_first=w, w_hidden=w)
+    with pytest.raises(UserError, match="trained with other settings"):
+        reproduce_rstdp.run(tmp_path, seeds=2, train_laps=0.01, topologies=("basic",), progress=False)
+
+
 def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
     weights = tmp_path / "run" / "weights"
     weights.mkdir(parents=True)

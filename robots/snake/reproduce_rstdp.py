@@ -97,12 +97,25 @@ def _windows(env) -> tuple[int, ...]:
     return (period, metrics.PAPER_WINDOW)
 
 
-def save_weights(path: Path, topology: str, seeds, loop) -> None:
-    """The trained weights of every seed, atomically."""
+def save_weights(path: Path, topology: str, seeds, loop, training_settings: str = "") -> None:
+    """The trained weights of every seed, atomically; ``training_settings`` names the training that made them."""
     tmp = path.with_suffix(".tmp.npz")
     net = jax.device_get(loop.controller)
-    np.savez(tmp, topology=topology, seeds=np.asarray(seeds), w_first=net.w_first, w_hidden=net.w_hidden)
+    np.savez(
+        tmp,
+        topology=topology,
+        seeds=np.asarray(seeds),
+        w_first=net.w_first,
+        w_hidden=net.w_hidden,
+        training=training_settings,
+    )
     tmp.replace(path)
+
+
+def _trained_with(path: Path) -> str:
+    """The ``training_settings`` a weights file was saved with ("" for a file saved without)."""
+    with np.load(path) as z:
+        return str(z["training"]) if "training" in z.files else ""
 
 
 def load_weights(path: Path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
@@ -216,6 +229,11 @@ def run(
         config, t0 = _config(topology), time.time()
         params = rstdp.network_params(config)
         weights = out / "weights" / f"{topology.replace('/', '-')}.npz"
+        fingerprint = json.dumps([dataclasses.asdict(config), seeds, steps, chunk])
+        if weights.exists() and _trained_with(weights) != fingerprint:
+            raise UserError(
+                f"{weights} was trained with other settings (seeds, --train-laps or the topology's); give another --out"
+            )
         if not weights.exists():
             result = training.train(
                 config,
@@ -225,17 +243,17 @@ def run(
                 env=env,
                 chunk_steps=chunk,
                 directory=out / "checkpoints" / topology.replace("/", "-"),
-                fingerprint=json.dumps([dataclasses.asdict(config), seeds, steps, chunk]),
+                fingerprint=fingerprint,
                 progress=_progress_bar(f"train {topology}", steps, progress),
             )
             np.savez(out / "training" / f"{topology.replace('/', '-')}.npz", **_flatten(jax.device_get(result.records)))
-            save_weights(weights, topology, seed_list, result.loop)
+            save_weights(weights, topology, seed_list, result.loop, fingerprint)
         _, saved_seeds, w1, w2 = load_weights(weights)
         with np.load(out / "training" / f"{topology.replace('/', '-')}.npz") as z:
             train_records[topology] = dict(z)
         nets = networks_with(config, params, saved_seeds, w1, w2)
         for name in TEST_TRACKS:
-            cache = out / "tests" / f"{topology.replace('/', '-')}-{name}.npz"
+            cache = out / "tests" / f"{topology.replace('/', '-')}-{name}-{test_steps or 'pass'}.npz"
             if cache.exists():
                 with np.load(cache) as z:
                     trace = training.TestTrace(**{k: z[k] for k in training.TestTrace._fields})
