@@ -69,6 +69,15 @@ def test_brax_auto_reset_restarts_the_task_mirrored():
     assert np.asarray(state.info["control_steps"]).tolist() == [1] * 8
 
 
+def test_the_replicated_training_state_has_the_sharding_of_brax_pmaps_outputs():
+    """Otherwise Brax's second training epoch sees new input shardings and compiles the epoch again."""
+    with ppo._brax_on_this_jax():
+        state = jax.device_put_replicated({"w": jnp.ones(3)}, jax.local_devices()[:1])
+    out = jax.pmap(lambda t: jax.tree.map(lambda v: v + 1.0, t), axis_name="i")(state)
+    assert state["w"].sharding == out["w"].sharding
+    np.testing.assert_array_equal(np.asarray(out["w"]), np.full((1, 3), 2.0))
+
+
 def test_bad_task_or_observation_is_a_one_line_error():
     with pytest.raises(UserError, match="unknown task"):
         ppo.make_task("snake-swim", "grid")

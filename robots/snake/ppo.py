@@ -136,12 +136,15 @@ class TrackTask(Wrapper):
         return state.replace(obs=self.observe(state), reward=reward, done=done, metrics=metrics)
 
 
-def make_task(task: str, observation: str, *, backend: str = "mujoco", track="eight", situation="standing-right"):
+def make_task(
+    task: str, observation: str, *, backend: str = "mujoco", track="eight", situation="standing-right", **physics
+):
     """``task`` (one of `TASKS`) with ``observation`` on ``backend``.
 
     ``snake-track``: `TrackTask` on the env of the spiking networks' training
-    (``track``); ``snake-pipe``: `PipeTask` in ``situation`` (one of
-    `robots.snake.pipes.SITUATIONS`).
+    (``track``; ``physics``, e.g. ``nthread``, goes to
+    `robots.snake.physics.make_physics`); ``snake-pipe``: `PipeTask` in
+    ``situation`` (one of `robots.snake.pipes.SITUATIONS`).
     """
     if task not in TASKS:
         raise UserError(f"unknown task {task!r}; choose from {', '.join(TASKS)}")
@@ -151,7 +154,7 @@ def make_task(task: str, observation: str, *, backend: str = "mujoco", track="ei
         if observation not in PIPE_OBSERVATIONS:
             raise UserError(f"unknown observation {observation!r} for snake-pipe; choose from detector, truth")
         return PipeTask(PipeEnv(backend, situation=situation), observation)
-    env = training.env_for(track, backend=backend, camera=observation == "grid")
+    env = training.env_for(track, backend=backend, camera=observation == "grid", **physics)
     return TrackTask(env, observation)
 
 
@@ -257,7 +260,12 @@ def _brax_on_this_jax():
     """``jax.device_put_replicated`` for Brax 0.14's trainer while it runs (JAX 0.10 removed it).
 
     The replacement is the one JAX's migration guide gives: each leaf stacked
-    once per device and put with a sharding over a one-axis mesh.
+    once per device and put with a sharding over a one-axis mesh. The axis is
+    named as Brax's ``pmap`` names its own (``"i"``), so the replicated
+    training state has the very sharding of the epoch's outputs: with another
+    name the second epoch saw new input shardings and compiled the whole
+    training epoch again (7 s here, inside what had been timed as steady
+    training).
     """
     if hasattr(jax, "device_put_replicated"):
         yield
@@ -265,7 +273,7 @@ def _brax_on_this_jax():
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     def device_put_replicated(x, devices):
-        sharding = NamedSharding(Mesh(np.array(devices), ("devices",)), PartitionSpec("devices"))
+        sharding = NamedSharding(Mesh(np.array(devices), ("i",)), PartitionSpec("i"))
         return jax.tree.map(lambda y: jax.device_put(jnp.stack([jnp.asarray(y)] * len(devices)), sharding), x)
 
     jax.device_put_replicated = device_put_replicated
