@@ -708,8 +708,9 @@ def make_physics(
             ``settings="default"`` `DEFAULT_DT`, 2 ms).
         substeps: physics steps per control step (default: as many as make
             the paper's 20 ms control step, `CONTROL_DT`).
-        nthread: threads of the C backend's pool (default: all CPU cores);
-            ignored by ``"mjx"``.
+        nthread: threads of the C backend's pool (default: the CPU cores this
+            process may run on, so a process pinned to one core steps on one
+            thread); ignored by ``"mjx"``.
         settings: ``"tuned"`` or ``"default"`` model settings (`load_mj_model`).
         mjx_impl: MJX's implementation for ``"mjx"``: ``"jax"`` (anywhere) or
             ``"warp"`` (MJX-Warp, which MuJoCo points users of large or
@@ -745,7 +746,7 @@ def make_physics(
     if int(substeps) != substeps or substeps < 1:
         raise UserError(f"substeps must be a positive integer, got {substeps}")
     if nthread is None:
-        nthread = os.cpu_count() or 1
+        nthread = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if nthread < 1:
         raise UserError(f"nthread must be at least 1, got {nthread}")
     if pipes is not None and not isinstance(pipes, PipeBodies):
