@@ -41,9 +41,19 @@ import jax
 import jax.numpy as jnp
 
 from robots.snake import ppo
-from spikejax.benchmarking import write_csv
+from spikejax.benchmarking import cores_label, machine_banner, write_csv
 
-HEADER = ["observation", "backend", "envs", "ppo_steps_per_s", "env_steps_per_s", "ppo_share", "first_update_s"]
+HEADER = [
+    "observation",
+    "backend",
+    "envs",
+    "cores",
+    "parallel",
+    "ppo_steps_per_s",
+    "env_steps_per_s",
+    "ppo_share",
+    "first_update_s",
+]
 PEER_HEADER = [
     "round",
     "trainer",
@@ -220,6 +230,10 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.child:
         return _child(a.child)
+    import brax
+    import mujoco
+
+    print(machine_banner(brax=brax.__version__, mujoco=mujoco.__version__), flush=True)
     if a.peer_rounds:
         write_csv(Path(a.out) / "ppo_peer.csv", peer_runs(a.peer_rounds, a.updates), PEER_HEADER)
     if a.no_sweep:
@@ -235,6 +249,10 @@ def main(argv=None) -> int:
                     "observation": observation,
                     "backend": a.backend,
                     "envs": envs,
+                    "cores": len(os.sched_getaffinity(0)),
+                    "parallel": "1 device, MuJoCo C threads"
+                    if a.backend == "mujoco"
+                    else cores_label(jax.device_count(), "device"),
                     "ppo_steps_per_s": round(rate),
                     "env_steps_per_s": round(env),
                     "ppo_share": round(1 - rate / env, 3),
