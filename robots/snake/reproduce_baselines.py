@@ -81,6 +81,9 @@ def run(
             d.mkdir(parents=True, exist_ok=True)
             t0 = time.time()
             meta = train_one(d, task="snake-track", observation=observation, steps=ppo_steps, seed=seed, progress=False)
+            # Each Brax training compiles programs of its own; XLA's JIT keeps ~1,000-2,000 memory maps for
+            # those of each, and after ~30 trainings a process hit the kernel's map limit (65,530) and crashed.
+            jax.clear_caches()
             if progress:
                 print(f"ppo-{observation} seed {seed}: {meta['env_steps']:,} env steps ({time.time() - t0:.0f} s)")
             dirs.append(d)
