@@ -11,7 +11,7 @@ from brax.envs.base import Env, State
 
 from robots.snake import camera as cam
 from robots.snake import tracks
-from robots.snake.env import SnakeEnv
+from robots.snake.env import TURN_THRESHOLD, SnakeEnv, steering_offset
 from spikejax.errors import UserError
 from spikejax.vision import dvs, render
 
@@ -160,6 +160,49 @@ def test_bad_input_is_a_user_error():
         SnakeEnv(event_capacity=0)
     with pytest.raises(UserError, match="physics backend"):
         SnakeEnv(backend="bullet")
+    with pytest.raises(UserError, match="steer_threshold"):
+        SnakeEnv(max_steer=0.1, steer_threshold=0.1)
+
+
+def test_steering_offset_by_hand():
+    a = np.array([-1.0, -0.5, 0.0, 0.25, 1.0])
+    np.testing.assert_allclose(steering_offset(a, 0.125), 0.125 * a)  # no threshold: the linear map
+    # With a threshold c: sign(a) (c + |a| (max - c)); 0 stays 0, +-1 is +-max.
+    np.testing.assert_allclose(steering_offset(a, 0.125, 0.08), [-0.125, -0.1025, 0.0, 0.09125, 0.125])
+    np.testing.assert_allclose(steering_offset(jnp.asarray(a), 0.125, 0.08), steering_offset(a, 0.125, 0.08))
+    np.testing.assert_allclose(steering_offset(a, 0.05, 0.08), 0.05 * np.sign(a))  # threshold above the range
+
+
+def _turned_deg(env, steer, steps):
+    """Heading change of the gait-averaged head path under a constant steering action, after 4 gait periods."""
+    period = env.window
+
+    def run(a):
+        def body(state, _):
+            state = env.step(state, jnp.stack([a, 0.0]))
+            return state, state.pipeline_state.head_pos[:2]
+
+        return jax.lax.scan(body, env.reset(jax.random.PRNGKey(0)), None, length=steps)[1]
+
+    xy = np.asarray(jax.jit(jax.vmap(run))(jnp.asarray(steer, jnp.float32)))
+    kernel = np.ones(period) / period
+    out = []
+    for path in xy:
+        mean = np.stack([np.convolve(path[:, i], kernel, "valid") for i in range(2)], 1)[4 * period :: period // 5]
+        heading = np.unwrap(np.arctan2(*np.diff(mean, axis=0).T[::-1]))
+        out.append(np.degrees(heading[-1] - heading[0]))
+    return np.array(out)
+
+
+def test_the_gait_does_not_turn_below_the_turning_threshold():
+    # max_steer 1: the action is C_o in rad. Below TURN_THRESHOLD the snake keeps its heading for
+    # 30 s; a little above it, and at the steering range's end, it turns (to the right for C_o > 0).
+    env = SnakeEnv("eight", camera=False, max_steer=1.0)
+    c_o = np.array([0.5, -0.9, 1.07, -1.07, 1.56]) * TURN_THRESHOLD
+    turned = _turned_deg(env, c_o, 2000)
+    assert np.all(np.abs(turned[:2]) < 8.0), turned  # measured 1-4 deg
+    assert turned[2] < -50.0 and turned[3] > 50.0, turned  # 80-95 deg
+    assert turned[4] < -180.0, turned  # 240 deg
 
 
 def test_steering_controller_by_hand():

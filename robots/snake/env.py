@@ -18,7 +18,8 @@ Spaces:
 
 * ``action`` ``(2,)`` in [-1, 1] (clipped): ``action[0]`` the steering input,
   ``C_o = action[0] * max_steer`` (positive turns right, like ``D_t`` of
-  Eq. (5) with the right neuron winning); ``action[1]`` the head offset,
+  Eq. (5) with the right neuron winning), or with a turning threshold
+  ``steer_threshold`` the range above it (`steering_offset`); ``action[1]`` the head offset,
   ``action[1] * max_head_offset`` added to the first joint (positive turns the
   head right).
 * ``obs`` ``(18,)``: ``[a_head, a_body, alpha_1 .. alpha_16]``: the target's
@@ -37,7 +38,8 @@ Spaces:
   building the event buffer (``info["events"]`` stays empty).
 * ``reward = -|a_head|``: the head should face the target.
 * ``info["params"]``: the episode's `SnakeEnvParams` (``max_steer``,
-  ``max_head_offset``, ``target_speed``, ``event_threshold``), traced, so that
+  ``max_head_offset``, ``target_speed``, ``event_threshold``,
+  ``steer_threshold``), traced, so that
   a sweep vmaps over them with one compiled program; the constructor's values
   unless ``reset(rng, params=...)`` was given others.
 * ``done = 1`` when the target is lost, the paper's reset rule (section III-B):
@@ -81,11 +83,22 @@ from robots.snake.physics import joint_qpos_index, make_physics
 from spikejax.errors import UserError
 from spikejax.vision import dvs, render
 
-__all__ = ["LOST_BODY_ANGLE", "LOST_HEAD_ANGLE", "SNAKE_SPEED", "SnakeEnv", "SnakeEnvParams", "rollout"]
+__all__ = [
+    "LOST_BODY_ANGLE",
+    "LOST_HEAD_ANGLE",
+    "SNAKE_SPEED",
+    "TURN_THRESHOLD",
+    "SnakeEnv",
+    "SnakeEnvParams",
+    "rollout",
+    "steering_offset",
+]
 
 SNAKE_SPEED = 0.108  # m/s, straight gait with the default GaitParams and tuned physics (measured)
 LOST_HEAD_ANGLE = math.radians(40.0)  # section III-B
 LOST_BODY_ANGLE = math.radians(35.0)  # section III-B
+# |C_o| below which this snake does not turn at all (measured: `tests/test_snake_env.py`); above it, 2-8 deg/s.
+TURN_THRESHOLD = 0.08
 
 
 class SnakeEnvParams(NamedTuple):
@@ -100,12 +113,32 @@ class SnakeEnvParams(NamedTuple):
         max_head_offset: head offset at full action, rad.
         target_speed: the target's speed along the track, m/s.
         event_threshold: frame-difference threshold on grey levels in (0, 1].
+        steer_threshold: ``|C_o|`` of the smallest nonzero action, rad
+            (`steering_offset`); 0 maps the action linearly.
     """
 
     max_steer: jax.Array
     max_head_offset: jax.Array
     target_speed: jax.Array
     event_threshold: jax.Array
+    steer_threshold: jax.Array
+
+
+def steering_offset(action, max_steer, steer_threshold=0.0):
+    """The gait's lateral offset ``C_o`` (Eq. (1)) for a steering action in [-1, 1].
+
+    ``C_o = sign(a) (c + |a| (max_steer - c))`` with ``c = steer_threshold``
+    (taken no larger than ``max_steer``): with ``c = 0`` the paper's
+    ``C_o = D_t * C_o_max`` (SPEC U23 leaves the projection of Eq. (5)'s
+    ``D_t`` to a turning angle open). This snake does not turn at all for
+    ``|C_o|`` below `TURN_THRESHOLD` and turns at 2-8 deg/s between it and
+    0.125 rad, so a linear map spends two thirds of the action's range on no
+    turn; ``c = TURN_THRESHOLD`` gives the whole range to the turning part.
+    Works on NumPy and JAX values alike.
+    """
+    xp = jnp if isinstance(action, jax.Array) else np
+    c = xp.minimum(steer_threshold, max_steer)
+    return xp.sign(action) * (c + xp.abs(action) * (max_steer - c))
 
 
 class SnakeEnv(Env):
@@ -131,6 +164,8 @@ class SnakeEnv(Env):
             than the snake" (section II-A): 1.2 times its straight speed.
         max_steer: ``C_o`` at full action, rad.
         max_head_offset: head offset at full action, rad.
+        steer_threshold: ``|C_o|`` at the smallest nonzero steering action,
+            rad (`steering_offset`); default 0, the linear map.
         compensate: the gait's head compensation (section II-A).
         gait: the gait's parameters (``C_o`` is replaced by the steering).
         pipes: optional pipes in the scene (track frame, as ``render.Cylinders``).
@@ -151,6 +186,7 @@ class SnakeEnv(Env):
         target_speed: float = 1.2 * SNAKE_SPEED,
         max_steer: float = 0.25,
         max_head_offset: float = 0.5,
+        steer_threshold: float = 0.0,
         compensate: bool = True,
         gait: GaitParams | None = None,
         pipes: render.Cylinders | None = None,
@@ -162,6 +198,8 @@ class SnakeEnv(Env):
             raise UserError(f"event_threshold must be positive, got {event_threshold}")
         if not target_speed > 0:
             raise UserError(f"target_speed must be positive, got {target_speed}")
+        if not 0 <= steer_threshold < max_steer:
+            raise UserError(f"steer_threshold must be in [0, max_steer = {max_steer}), got {steer_threshold}")
         if isinstance(track, tracks.Track):
             self._track, self.track_name = track, "waypoints"
         else:
@@ -173,7 +211,10 @@ class SnakeEnv(Env):
         self.event_capacity = int(event_capacity)
         self.compact_events = bool(compact_events)
         self.params = SnakeEnvParams(
-            *(jnp.asarray(x, jnp.float32) for x in (max_steer, max_head_offset, target_speed, event_threshold))
+            *(
+                jnp.asarray(x, jnp.float32)
+                for x in (max_steer, max_head_offset, target_speed, event_threshold, steer_threshold)
+            )
         )
         self.compensate = bool(compensate)
         self.gait = gait_params() if gait is None else gait
@@ -252,7 +293,8 @@ class SnakeEnv(Env):
         """One control step (see the module docstring)."""
         action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
         params = state.info["params"]
-        steer, head_offset = action[0] * params.max_steer, action[1] * params.max_head_offset
+        steer = steering_offset(action[0], params.max_steer, params.steer_threshold)
+        head_offset = action[1] * params.max_head_offset
         phys = state.pipeline_state
         # A state at time 0 starts an episode, also when Brax's AutoResetWrapper put back only the physics.
         fresh = phys.time == 0.0

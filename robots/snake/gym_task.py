@@ -38,7 +38,7 @@ import mujoco
 import numpy as np
 
 from robots.snake import gait, tracks, training
-from robots.snake.env import LOST_BODY_ANGLE, LOST_HEAD_ANGLE
+from robots.snake.env import LOST_BODY_ANGLE, LOST_HEAD_ANGLE, steering_offset
 from robots.snake.physics import joint_qpos_index, load_mj_model
 from spikejax.errors import UserError
 
@@ -85,6 +85,7 @@ def _constants() -> dict:
         "substeps": int(env.physics.substeps),
         "gait": gait.GaitParams(*(float(x) for x in env.gait)),
         "max_steer": float(env.params.max_steer),
+        "steer_threshold": float(env.params.steer_threshold),
         "max_head": float(env.params.max_head_offset),
         "speed": float(env.params.target_speed),
         "window": int(env.window),
@@ -114,6 +115,7 @@ class MujocoTrackEnv(gymnasium.Env):
             raise UserError(f"max_steps must be at least 1, got {max_steps}")
         self.dt, self.substeps, self.gait, self.window = c["dt"], c["substeps"], c["gait"], c["window"]
         self.max_steer, self.max_head, self.speed = c["max_steer"], c["max_head"], c["speed"]
+        self.steer_threshold = c["steer_threshold"]
         self.origin, self.tracks = c["origin"], c["tracks"]
         self.model = load_mj_model("tuned")
         self.data = mujoco.MjData(self.model)
@@ -137,7 +139,8 @@ class MujocoTrackEnv(gymnasium.Env):
 
     def step(self, action):
         action = np.clip(np.asarray(action, np.float64), -1.0, 1.0)
-        steer, head_offset = action[0] * self.max_steer, action[1] * self.max_head
+        steer = steering_offset(action[0], self.max_steer, self.steer_threshold)
+        head_offset = action[1] * self.max_head
         if self.as_jax:
             d = self.data
             for x in (d.qpos, d.qvel):

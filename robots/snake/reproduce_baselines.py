@@ -42,8 +42,8 @@ HEADER = [*reproduce_rstdp.HEADER, "env_steps_to_learn"]
 
 
 def scripted_controller(dt: float) -> Controller:
-    """`robots.snake.steering` (its default gains) as a `spikejax.rollout.Controller`."""
-    params = steering.SteeringParams()
+    """`robots.snake.steering`, its gains for the training env's range (`steering.for_max_steer`), as a Controller."""
+    params = steering.for_max_steer(training.MAX_STEER)
 
     def step(_, cstate, env_state, *, key):
         cstate, action = steering.step(params, cstate, env_state.obs, dt)

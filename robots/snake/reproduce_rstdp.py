@@ -253,7 +253,8 @@ def run(
             train_records[topology] = dict(z)
         nets = networks_with(config, params, saved_seeds, w1, w2)
         for name in TEST_TRACKS:
-            cache = out / "tests" / f"{topology.replace('/', '-')}-{name}-{test_steps or 'pass'}.npz"
+            length = test_steps or training.pass_steps(training.env_for(name, camera=False))
+            cache = out / "tests" / f"{topology.replace('/', '-')}-{name}-{length}.npz"
             if cache.exists():
                 with np.load(cache) as z:
                     trace = training.TestTrace(**{k: z[k] for k in training.TestTrace._fields})

@@ -23,7 +23,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-__all__ = ["SteeringParams", "SteeringState", "init", "step"]
+__all__ = ["SteeringParams", "SteeringState", "for_max_steer", "init", "step"]
 
 
 class SteeringParams(NamedTuple):
@@ -38,11 +38,36 @@ class SteeringParams(NamedTuple):
     loses the target within about a minute; a higher body gain turns the snake
     on the spot (a large ``C_o`` stalls the slithering gait) and loses it at
     once. ``tau = 0`` means no filtering.
+
+    The gains are per unit of the action range, so they depend on the env's
+    ``max_steer``: these were tuned at `robots.snake.env.SnakeEnv`'s 0.25 rad;
+    `for_max_steer` keeps their ``C_o`` per radian of target angle for
+    another range.
     """
 
     gain: float | jax.Array = 1.0
     head_gain: float | jax.Array = 2.0
     tau: float | jax.Array = 0.0
+
+
+def for_max_steer(max_steer: float) -> SteeringParams:
+    """The default gains rescaled to a steering range of ``max_steer`` rad (the same ``C_o`` per radian).
+
+    At `robots.snake.training.MAX_STEER` (0.125 rad) this doubles the body
+    gain to 2. Kept at 1 there, the controller lost the target 0.8-0.9 times
+    a minute, at every first turn of the test tracks: this snake does not
+    turn at all for ``|C_o|`` below `robots.snake.env.TURN_THRESHOLD`
+    (0.08 rad, 64 % of that range), so it only turned once the body's angle
+    to the target passed about 37 degrees, and the body-angle rule (35
+    degrees) fired first. Measured over full test passes of the ladder, the
+    zigzag and their mirrors in `robots.snake.training.env_for`'s env, a grid
+    of body gains 1-3 and head gains 1-3: body 2 / head 2 was one of the few
+    cells that never lost the target on any of the four, and had the lowest
+    running-mean head angle (0.10-0.14 degrees in the paper's 625-step
+    window, 3.0-3.1 degrees instantaneous); body 1 and 1.5 failed on all four.
+    """
+    defaults = SteeringParams()
+    return defaults._replace(gain=defaults.gain * 0.25 / max_steer)
 
 
 class SteeringState(NamedTuple):
