@@ -80,3 +80,14 @@ def test_reproduce_snake_baselines_small(tmp_path):
     assert controllers == {"scripted", "ppo-grid", "ppo-angles", "basic", "basic-head", "unified", "separated"}
     assert {r["seeds"] for r in table if r["topology"] != "scripted"} == {"2"}
     assert (tmp_path / "snake_baselines.png").exists()
+
+
+def test_a_test_pass_is_long_enough_for_a_snake_at_its_tracking_speed():
+    from robots.snake import tracks
+
+    env = training.env_for("ladder", camera=False)
+    straight = float(tracks.drawn_length("ladder")) / snake_env.SNAKE_SPEED / env.dt
+    steps = training.pass_steps(env)
+    assert steps % training.BLOCK == 0 and 0 <= steps - 2.0 * straight < training.BLOCK
+    # The scripted steering covers the test tracks at 0.062-0.064 m/s: a pass must fit at 0.062.
+    assert steps * env.dt * 0.062 > float(tracks.drawn_length("ladder"))
