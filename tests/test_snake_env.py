@@ -12,6 +12,7 @@ from brax.envs.base import Env, State
 from robots.snake import camera as cam
 from robots.snake import tracks
 from robots.snake.env import TURN_THRESHOLD, SnakeEnv, steering_offset
+from robots.snake.gait import gait_params
 from spikejax.errors import UserError
 from spikejax.vision import dvs, render
 
@@ -160,6 +161,8 @@ def test_bad_input_is_a_user_error():
         SnakeEnv(event_capacity=0)
     with pytest.raises(UserError, match="physics backend"):
         SnakeEnv(backend="bullet")
+    with pytest.raises(UserError, match="friction cone"):
+        SnakeEnv(friction_cone="square")
     with pytest.raises(UserError, match="steer_threshold"):
         SnakeEnv(max_steer=0.1, steer_threshold=0.1)
 
@@ -173,8 +176,8 @@ def test_steering_offset_by_hand():
     np.testing.assert_allclose(steering_offset(a, 0.05, 0.08), 0.05 * np.sign(a))  # threshold above the range
 
 
-def _turned_deg(env, steer, steps):
-    """Heading change of the gait-averaged head path under a constant steering action, after 4 gait periods."""
+def _turned_deg(env, steer, steps, skip=4):
+    """Heading change of the gait-averaged head path under a constant steering action, after ``skip`` gait periods."""
     period = env.window
 
     def run(a):
@@ -188,7 +191,7 @@ def _turned_deg(env, steer, steps):
     kernel = np.ones(period) / period
     out = []
     for path in xy:
-        mean = np.stack([np.convolve(path[:, i], kernel, "valid") for i in range(2)], 1)[4 * period :: period // 5]
+        mean = np.stack([np.convolve(path[:, i], kernel, "valid") for i in range(2)], 1)[skip * period :: period // 5]
         heading = np.unwrap(np.arctan2(*np.diff(mean, axis=0).T[::-1]))
         out.append(np.degrees(heading[-1] - heading[0]))
     return np.array(out)
@@ -203,6 +206,20 @@ def test_the_gait_does_not_turn_below_the_turning_threshold():
     assert np.all(np.abs(turned[:2]) < 8.0), turned  # measured 1-4 deg
     assert turned[2] < -50.0 and turned[3] > 50.0, turned  # 80-95 deg
     assert turned[4] < -180.0, turned  # 240 deg
+
+
+def test_on_the_elliptic_friction_cone_the_turning_rate_is_proportional_to_the_lateral_offset():
+    # Isotropic friction: the snake turns for every offset, to the right for C_o > 0, mirror-symmetrically,
+    # by an angle that grows with C_o; the threshold above is the pyramidal cone's. A_o 45 deg keeps the
+    # gait near its pyramidal speed (0.09 m/s; 0.05 at 30 deg).
+    gait = gait_params()._replace(A_o=math.radians(45.0))
+    env = SnakeEnv("eight", camera=False, max_steer=1.0, gait=gait, friction_cone="elliptic")
+    c_o = np.array([0.0, 0.03, 0.0625, 0.125])
+    turned = _turned_deg(env, np.concatenate([c_o, -c_o[1:]]), 3000, skip=12)  # the last 30 s of 60
+    assert abs(turned[0]) < 20.0, turned  # measured -10 deg: the straight gait's heading wanders
+    right = (turned[1:4] - turned[4:]) / 2  # a mirror pair's mean cancels the wander
+    assert right[0] < -15.0 and right[2] < right[1] < right[0], turned  # -31, -71, -169 deg
+    np.testing.assert_allclose(right / c_o[1:], right[2] / c_o[3], rtol=0.5)  # -1,027, -1,140, -1,355 deg/rad
 
 
 def test_steering_controller_by_hand():

@@ -87,6 +87,8 @@ __all__ = [
     "TUNED_DT",
     "TUNED_ITERATIONS",
     "TUNED_LS_ITERATIONS",
+    "ELLIPTIC_TUNED_ITERATIONS",
+    "FRICTION_CONES",
     "PARK_DEPTH",
     "PIPE_GROUP",
     "PhysState",
@@ -109,9 +111,17 @@ HEAD_SITE = "head_camera"
 N_MODULES = 17
 TUNED_ITERATIONS = 20
 TUNED_LS_ITERATIONS = 20
+ELLIPTIC_TUNED_ITERATIONS = 50  # a cold CG start needs 16 on average under the elliptic cone; 20 cut many solves short
 TUNED_DT = 0.004  # s
 DEFAULT_DT = 0.002  # s
 CONTROL_DT = 0.02  # s, the paper's control step
+# MuJoCo's friction cones for the floor contacts. "pyramidal" (the default, every result unless said otherwise)
+# bounds the friction force by |f_1| + |f_2| <= mu f_n in the contact frame, whose first axis MuJoCo lays along
+# each capsule: a module slides 1.4 times as easily at 45 degrees to its axis as along or across it, and the gait
+# then keeps its heading for |C_o| < 0.08 rad and turns in jumps above. "elliptic" is isotropic Coulomb friction,
+# |f| <= mu f_n: the turning rate is proportional to C_o, and the gait of `gait_params` is half as fast
+# (docs/ARCHITECTURE.md, "The snake's friction cone").
+FRICTION_CONES = ("pyramidal", "elliptic")
 
 
 class PhysState(NamedTuple):
@@ -249,7 +259,9 @@ def _add_pipes(spec, bodies: PipeBodies, settings: str) -> None:
 
 
 @functools.cache
-def load_mj_model(settings: str = "tuned", dt: float | None = None, pipes: PipeBodies | None = None) -> mujoco.MjModel:
+def load_mj_model(
+    settings: str = "tuned", dt: float | None = None, pipes: PipeBodies | None = None, friction_cone: str = "pyramidal"
+) -> mujoco.MjModel:
     """The compiled snake for MuJoCo's C engine (cached), with ``settings`` and time step ``dt``.
 
     Args:
@@ -262,12 +274,18 @@ def load_mj_model(settings: str = "tuned", dt: float | None = None, pipes: PipeB
         pipes: physical pipes to add (`PipeBodies`: mocap bodies placed
             through `PhysState.mocap_pos`); ``None``, the snake alone, is
             ``snake.xml``'s model unchanged.
+        friction_cone: ``"pyramidal"`` (MuJoCo's default, ``snake.xml``) or
+            ``"elliptic"`` (isotropic Coulomb friction; with ``"tuned"`` the
+            CG solver's cap rises to `ELLIPTIC_TUNED_ITERATIONS`). See
+            `FRICTION_CONES`.
 
     Returns:
         The model (treat it as read-only: it is shared).
     """
     if settings not in ("default", "tuned"):
         raise UserError(f"unknown snake model settings {settings!r}; expected 'default' or 'tuned'")
+    if friction_cone not in FRICTION_CONES:
+        raise UserError(f"unknown friction cone {friction_cone!r}; expected one of {', '.join(FRICTION_CONES)}")
     if dt is None:
         dt = TUNED_DT if settings == "tuned" else DEFAULT_DT
     if not dt > 0:
@@ -283,8 +301,10 @@ def load_mj_model(settings: str = "tuned", dt: float | None = None, pipes: PipeB
                 geomname1="floor", geomname2=f"module{k}", condim=3, friction=[0.5, 0.5, 0.005, 0.0001, 0.0001]
             )
         spec.option.solver = mujoco.mjtSolver.mjSOL_CG
-        spec.option.iterations = TUNED_ITERATIONS
+        spec.option.iterations = TUNED_ITERATIONS if friction_cone == "pyramidal" else ELLIPTIC_TUNED_ITERATIONS
         spec.option.ls_iterations = TUNED_LS_ITERATIONS
+    if friction_cone == "elliptic":
+        spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     if pipes is not None:
         _add_pipes(spec, pipes.validate(), settings)
     model = spec.compile()
@@ -698,6 +718,7 @@ def make_physics(
     settings: str = "tuned",
     mjx_impl: str = "jax",
     pipes: PipeBodies | None = None,
+    friction_cone: str = "pyramidal",
 ) -> SnakePhysics:
     """The snake's physics with the given backend (see the module's notes).
 
@@ -718,6 +739,7 @@ def make_physics(
         pipes: physical pipes (`PipeBodies`), placed per episode through the
             state's mocap fields without recompiling (`robots.snake.pipes.place_pipes`);
             ``None`` for the snake alone.
+        friction_cone: ``"pyramidal"`` or ``"elliptic"`` (`FRICTION_CONES`).
 
     Returns:
         A `SnakePhysics`.
@@ -751,7 +773,7 @@ def make_physics(
         raise UserError(f"nthread must be at least 1, got {nthread}")
     if pipes is not None and not isinstance(pipes, PipeBodies):
         raise UserError(f"pipes must be a PipeBodies, got {type(pipes).__name__}")
-    model = load_mj_model(settings, dt, pipes)
+    model = load_mj_model(settings, dt, pipes, friction_cone)  # raises UserError for an unknown cone
     if backend == "mujoco":
         step = _mujoco_backend(model, int(substeps), int(nthread), settings, dt)
     else:
