@@ -10,6 +10,7 @@ import pytest
 from robots.hexapod import camera as cam
 from robots.hexapod import decisions, physics, prey
 from robots.hexapod.vision import FORWARD, LEFT, PAPER_SENSOR, RIGHT
+from spikejax.errors import UserError
 from spikejax.vision import render
 
 
@@ -54,7 +55,7 @@ def test_a_prey_at_d_near_puts_its_base_on_the_near_far_boundary_row():
     world = cam.prey_scene(_scene((cam_x + cam.D_NEAR + prey.PREY_SIZE / 2, 0.0, True)))
     frame = jax.jit(cam.frame)
     img = np.asarray(frame(torso, world))
-    column = img[:, 128]
+    column = img[:, int(cam.CAMERA.center_col)]  # the optical axis
     dark = np.nonzero(column < 0.3)[0]
     assert dark.max() + 1 == pytest.approx(100, abs=1)
     # A dead slot is not drawn: the frame is the bare floor.
@@ -112,8 +113,12 @@ def test_vmap_over_scenes_equals_single_runs(fixed_decisions):
 def test_capacity_scales_with_the_pixels():
     assert decisions.capacity(cam.EDGE_CONFIG) == decisions.CAPACITY
     assert decisions.capacity(PAPER_SENSOR) == 25 * decisions.CAPACITY
-    assert cam.sensor_camera(PAPER_SENSOR) == render.Camera(width=1280, height=800, fov=cam.CAMERA.fov)
-    assert cam.sensor_camera(cam.EDGE_CONFIG) == cam.CAMERA
+    # The lens centred on the windows (columns 0-1199 of 1280, 0-239 of 256), or on the sensor as in the paper.
+    assert cam.sensor_camera(PAPER_SENSOR) == render.Camera(width=1280, height=800, fov=cam.CAMERA.fov, cx=600.0)
+    assert cam.sensor_camera(PAPER_SENSOR, "paper") == render.Camera(width=1280, height=800, fov=cam.CAMERA.fov)
+    assert cam.sensor_camera(cam.EDGE_CONFIG) == cam.CAMERA and cam.CAMERA.center_col == 120.0
+    with pytest.raises(UserError, match="lens"):
+        cam.sensor_camera(cam.EDGE_CONFIG, "fisheye")
 
 
 def test_ordered_readout_is_eq1_2_input_by_input():

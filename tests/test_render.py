@@ -59,6 +59,22 @@ def test_off_axis_sphere_lands_where_the_pinhole_model_puts_it():
     np.testing.assert_allclose(render.project(camera, pos, rot, center), [64.0 - f * 0.16, 64.0 + f * 0.12], rtol=1e-5)
 
 
+def test_an_off_centre_optical_axis_shifts_the_view_by_whole_pixels():
+    # cx = 56 on a 128-wide image: column j looks where the centred camera's column j + 8 looks.
+    centred, shifted = render.Camera(supersample=2), render.Camera(supersample=2, cx=56.0)
+    assert shifted.focal == centred.focal and centred.center_col == 64.0
+    pos, rot = np.zeros(3), _yaw(0.0)
+    scene = _sphere_only(np.array([2.5, 0.2, -0.1]), radius=0.2)._replace(ambient=1.0)
+    a = np.asarray(render.render(scene, pos, rot, centred))
+    b = np.asarray(render.render(scene, pos, rot, shifted))
+    np.testing.assert_array_equal(b[:, :-8], a[:, 8:])
+    assert not np.array_equal(a, b)
+    point = np.array([2.5, 0.4, -0.3])
+    np.testing.assert_allclose(
+        render.project(shifted, pos, rot, point), render.project(centred, pos, rot, point) - np.array([8.0, 0.0])
+    )
+
+
 def test_focal_length_from_field_of_view():
     assert render.Camera(width=128, fov=math.radians(90.0)).focal == pytest.approx(64.0)
     assert render.Camera().focal == pytest.approx(64.0 / math.tan(math.radians(30.0)))
@@ -159,6 +175,8 @@ def test_render_vmaps_over_camera_poses():
 def test_bad_camera_is_a_user_error():
     with pytest.raises(UserError, match="field of view"):
         render.Camera(fov=4.0).validate()
+    with pytest.raises(UserError, match="cx"):
+        render.Camera(cx=-1.0).validate()
 
 
 def test_camera_is_static_configuration():

@@ -180,6 +180,7 @@ def decide(
     with_spikes: bool = False,
     *,
     config: edges.EdgeConfig = cam.EDGE_CONFIG,
+    lens: str = cam.LENS,
 ):
     """Render, emulate, filter and choose along one torso track ``(N_FRAMES, 6)``: a `Decision`.
 
@@ -187,11 +188,12 @@ def decide(
     ``config`` (static) is the sensor: the scaled `camera.EDGE_CONFIG`, or
     `vision.PAPER_SENSOR` for the paper's 800 x 1280 pixels and 100-pixel
     windows with its own weights (ACCEPTANCE A11); the camera's pose, lens,
-    DVS noise rate per pixel and the scene are the same.
+    DVS noise rate per pixel and the scene are the same. ``lens`` (static,
+    `camera.LENSES`): where the optical axis meets the sensor.
     """
     params = vision_params(config)
     cap = capacity(config)
-    camera = cam.sensor_camera(config)
+    camera = cam.sensor_camera(config, lens)
     world = cam.prey_scene(scene)
     poses = _to_scene_frame(jnp.asarray(track, jnp.float32), scene.start)
     times = jnp.arange(N_FRAMES, dtype=jnp.float32) * FRAME_S

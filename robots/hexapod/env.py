@@ -223,6 +223,8 @@ class HexapodEnv(Env):
         seconds: time limit of an episode, s (rounded to whole steps of `STEP_S`).
         see: render, emulate the DVS and run the visual SNN each step.
         nthread: C threads (default: the cores).
+        lens: where the head camera's optical axis meets its sensor
+            (`robots.hexapod.camera.LENSES`; default centred on the windows).
     """
 
     def __init__(
@@ -235,6 +237,7 @@ class HexapodEnv(Env):
         seconds: float = 12.8,
         see: bool = True,
         nthread: int | None = None,
+        lens: str = cam.LENS,
     ):
         if backend not in BACKENDS:
             raise UserError(f"unknown hexapod physics backend {backend!r}; expected one of {', '.join(BACKENDS)}")
@@ -244,6 +247,8 @@ class HexapodEnv(Env):
             raise UserError(f"seconds must be at least one step ({STEP_S:g} s), got {seconds!r}")
         self.max_steps = int(round(seconds / STEP_S))
         self.see = bool(see)
+        cam.sensor_camera(cam.EDGE_CONFIG, lens)  # raises UserError for an unknown lens
+        self.lens = lens
         self.step_params = step_params()
         self.weights = trained_network(network_seed)
         alpha, v_th = GaitTrialParams().alpha, GaitTrialParams().v_th
@@ -358,7 +363,7 @@ class HexapodEnv(Env):
         rng, k_see = jax.random.split(info["rng"])
         if self.see:
             track = jnp.concatenate([info["track"][None], frames], axis=0)
-            d = decisions.decide(track, scene, k_see)
+            d = decisions.decide(track, scene, k_see, lens=self.lens)
             counts = d.out_counts.astype(jnp.int32)
             ordered = d.ordered_counts.astype(jnp.int32)
             seen = {

@@ -145,12 +145,12 @@ def _plot(path: Path, examples) -> None:
     fig.savefig(path, dpi=110)
 
 
-def _decide_all(draws, index, n_prey, seed, size, config, chunk, bar) -> dict:
+def _decide_all(draws, index, n_prey, seed, size, config, chunk, bar, lens=cam.LENS) -> dict:
     """Every scene's `decisions.Decision` fields and nearest distances, as NumPy arrays, ``chunk`` scenes a batch."""
     step = jax.jit(
         jax.vmap(
             lambda track, i, n: (
-                decisions.decide(track, scenes(seed, i, n, size), _keys(seed, i), config=config),
+                decisions.decide(track, scenes(seed, i, n, size), _keys(seed, i), config=config, lens=lens),
                 _nearest_from_camera(scenes(seed, i, n, size), track[0]),
             )
         )
@@ -182,6 +182,7 @@ def run(
     empty_n: int = 200,
     full_check: int = 0,
     prey_size: float = prey_mod.PREY_SIZE,
+    lens: str = cam.LENS,
     no_progress: bool = False,
 ) -> int:
     """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--empty M] [--full-check K] [--prey-size S] [--seed S]``.
@@ -195,6 +196,7 @@ def run(
         full_check: the first ``full_check`` scenes also at the paper's 800 x 1280
             sensor (ACCEPTANCE A11): the agreement of the two decisions.
         prey_size: the cubes' edge, m (`prey.PREY_SIZE`; 0.1 gives the cubes as tall as the camera).
+        lens: the camera's optical axis on the windows' centre or, as in the paper, the sensor's (`camera.LENSES`).
         no_progress: hide the progress bar.
     """
     with output_directory(out, command="reproduce hexapod-decisions") as out:
@@ -203,11 +205,13 @@ def run(
         n_prey = np.where(index < scenes_n, 1 + index % prey_mod.MAX_PREY, 0)
         total = scenes_n + empty_n + min(full_check, scenes_n)
         with tqdm(total=total, desc="hexapod decisions", unit="scene", disable=no_progress) as bar:
-            res = _decide_all(draws, index, n_prey, seed, prey_size, cam.EDGE_CONFIG, _CHUNK, bar)
+            res = _decide_all(draws, index, n_prey, seed, prey_size, cam.EDGE_CONFIG, _CHUNK, bar, lens)
             full = None
             if full_check:
                 k = min(full_check, scenes_n)
-                full = _decide_all(draws[:k], index[:k], n_prey[:k], seed, prey_size, PAPER_SENSOR, _FULL_CHUNK, bar)
+                full = _decide_all(
+                    draws[:k], index[:k], n_prey[:k], seed, prey_size, PAPER_SENSOR, _FULL_CHUNK, bar, lens
+                )
         prey_rows = index < scenes_n
         sub = {k: v[prey_rows] for k, v in res.items()}
         empty = {k: v[~prey_rows] for k, v in res.items()}
@@ -240,7 +244,7 @@ def run(
                 track = jnp.asarray(decisions.g1_step_tracks([draws[i]])[0])
                 j = jnp.int32(i)
                 scene = scenes(seed, j, size=prey_size)
-                examples.append((title, *decisions.decide(track, scene, _keys(seed, j), with_spikes=True)))
+                examples.append((title, *decisions.decide(track, scene, _keys(seed, j), with_spikes=True, lens=lens)))
         if examples:
             _plot(out / "hexapod_decisions.png", examples)
         for r in rows:
@@ -302,6 +306,12 @@ def _add_arguments(parser) -> None:
         help=f"the prey cubes' edge, m (default {prey_mod.PREY_SIZE:g})",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of scenes, robots and DVS noise (default 0)")
+    parser.add_argument(
+        "--lens",
+        choices=cam.LENSES,
+        default=cam.LENS,
+        help="the camera's optical axis on the windows' centre (default) or, as in the paper, on the sensor's centre",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 

@@ -81,6 +81,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from robots.common import write_csv
+from robots.hexapod import camera as cam
 from robots.hexapod import controllers
 from robots.hexapod import prey as prey_mod
 from robots.hexapod.env import BACKENDS, STEP_S, HexapodEnv
@@ -528,6 +529,7 @@ def run(
     seconds: float = 12.8,
     seed: int = 0,
     backend: str = "mujoco",
+    lens: str = cam.LENS,
     no_progress: bool = False,
 ) -> int:
     """``spikejax reproduce hexapod-prey --out DIR [--episodes N] [--scene FILE] [--seconds S] [--seed S] [--backend B]``.
@@ -539,6 +541,7 @@ def run(
         seconds: an episode's time limit, s.
         seed: seed of the scenes, robots and sensor noise.
         backend: the physics, ``"mujoco"`` (MuJoCo's C engine) or ``"mjx"`` (`HexapodEnv`).
+        lens: the head camera's lens, centred on the windows or, as in the paper, on the sensor (`camera.LENSES`).
         no_progress: hide the progress bars.
     """
     if episodes < 1:
@@ -546,8 +549,8 @@ def run(
     fixed = prey_mod.load_scene(scene) if scene is not None else None
     with output_directory(out, command="reproduce hexapod-prey") as out:
         envs = {
-            True: HexapodEnv(backend, seconds=seconds, robot_seed=seed),
-            False: HexapodEnv(backend, seconds=seconds, robot_seed=seed, see=False),
+            True: HexapodEnv(backend, seconds=seconds, robot_seed=seed, lens=lens),
+            False: HexapodEnv(backend, seconds=seconds, robot_seed=seed, see=False, lens=lens),
         }
         few = max(1, episodes // 10)
         if fixed is not None:
@@ -639,6 +642,12 @@ def _add_arguments(parser) -> None:
         choices=BACKENDS,
         default="mujoco",
         help="physics: mujoco (MuJoCo's C engine, for CPUs; default) or mjx (for accelerators)",
+    )
+    parser.add_argument(
+        "--lens",
+        choices=cam.LENSES,
+        default=cam.LENS,
+        help="the camera's optical axis on the windows' centre (default) or, as in the paper, on the sensor's centre",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
 

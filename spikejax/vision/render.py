@@ -22,12 +22,14 @@ Conventions
   the optical axis, y to the left, z up, the usual body frame of a robot.
 * Image: ``(height, width)``, row 0 at the top, column 0 on the left. Pixel
   ``(row, col)`` looks through the point ``(col + 0.5, row + 0.5)`` of the image
-  plane, so the optical axis meets the image at ``(width / 2, height / 2)``, the
+  plane, so the optical axis meets the image at ``(c_x, height / 2)``, where
+  ``c_x`` (`Camera.center_col`) is ``width / 2`` unless set: by default the
   corner shared by the four central pixels.
 * Pinhole model: with horizontal field of view ``fov`` the focal length in
   pixels is ``f = (width / 2) / tan(fov / 2)``; a point at camera coordinates
-  ``(x, y, z)``, ``x > 0``, is seen at column ``width / 2 - f y / x`` and row
-  ``height / 2 - f z / x``. A sphere of radius ``R`` centred on the axis at
+  ``(x, y, z)``, ``x > 0``, is seen at column ``c_x - f y / x`` and row
+  ``height / 2 - f z / x``. A ``c_x`` off the centre is a lens mounted off the
+  sensor's centre: the same focal length, the view shifted sideways. A sphere of radius ``R`` centred on the axis at
   distance ``d`` covers a disc of radius ``f R / sqrt(d**2 - R**2)`` pixels.
 * A pipe with a wall (`Pipes`) is drawn by `pipe_primitives` as its outer
   tube, its bore (a second tube of radius ``radius - wall``), the annular
@@ -89,12 +91,21 @@ class Camera:
     The default, 128 x 128 pixels, is the DVS128 sensor both snake papers
     simulate; neither paper states the field of view, so the default is 60
     degrees (1.047 rad), the default ``horizontal_fov`` of a Gazebo camera.
+    ``cx``, the column where the optical axis meets the image (``None``:
+    ``width / 2``), shifts the view sideways without changing ``fov``'s
+    focal length.
     """
 
     width: int = 128
     height: int = 128
     fov: float = math.radians(60.0)
     supersample: int = 1
+    cx: float | None = None
+
+    @property
+    def center_col(self) -> float:
+        """The optical axis's column, ``cx`` or ``width / 2``."""
+        return 0.5 * self.width if self.cx is None else float(self.cx)
 
     @property
     def focal(self) -> float:
@@ -108,6 +119,8 @@ class Camera:
             raise UserError(f"camera field of view must be in (0, pi) radians, got {self.fov}")
         if self.supersample < 1:
             raise UserError(f"camera supersample must be >= 1, got {self.supersample}")
+        if self.cx is not None and not 0.0 <= self.cx <= self.width:
+            raise UserError(f"camera cx must be within the image's 0-{self.width} columns, got {self.cx}")
         return self
 
 
@@ -327,7 +340,7 @@ def concat_cylinders(*cyls: Cylinders) -> Cylinders:
 def _local_directions(camera: Camera) -> np.ndarray:
     s = camera.supersample
     f = camera.focal
-    cols = (np.arange(camera.width * s) + 0.5) / s - 0.5 * camera.width
+    cols = (np.arange(camera.width * s) + 0.5) / s - camera.center_col
     rows = (np.arange(camera.height * s) + 0.5) / s - 0.5 * camera.height
     col, row = np.meshgrid(cols, rows)
     d = np.stack([np.full_like(col, f), -col, -row], axis=-1)
@@ -346,7 +359,7 @@ def project(camera: Camera, cam_pos, rot, point) -> jax.Array:
     """
     p = jnp.asarray(rot).T @ (jnp.asarray(point) - jnp.asarray(cam_pos))
     f = camera.focal
-    return jnp.stack([0.5 * camera.width - f * p[1] / p[0], 0.5 * camera.height - f * p[2] / p[0]])
+    return jnp.stack([camera.center_col - f * p[1] / p[0], 0.5 * camera.height - f * p[2] / p[0]])
 
 
 def _light(scene: Scene) -> tuple[jax.Array, jax.Array, jax.Array]:
