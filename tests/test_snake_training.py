@@ -57,10 +57,10 @@ def test_a_short_training_follows_turns_that_untrained_networks_lose():
 
     An untrained basic net has equal weights on both sides, goes straight and
     loses the target at the first turn (the reset rule of Sec. III-B) on every
-    seed. After 100 s of R-STDP (Eq. (6)-(9)) some seeds follow both turns;
-    training this short is weak (measured: 5 of 8 seed-turns without a
-    failure, and one seed learns to veer at once), so the test asks for what
-    it measured with a margin, not for the paper's tracking.
+    seed. After 100 s of R-STDP (Eq. (6)-(9)) the seeds follow both turns
+    (measured: 8 of 8 seed-turns without a failure; the turns are 1.8 m deep,
+    since with the head's swing cancelled an untrained net got round 1.2 m
+    ones on half its seeds); the test asks for 6 of 8.
     """
     config = rstdp.NetworkConfig(topology="basic")
     params = rstdp.network_params(config)
@@ -72,13 +72,13 @@ def test_a_short_training_follows_turns_that_untrained_networks_lose():
     both = jax.tree.map(lambda a, b: np.concatenate([a, b]), untrained, trained.loop.controller)
     failures = []
     for side in (1.0, -1.0):
-        turn = tracks.from_waypoints([[0, 0], [0.2, 0], [2.5, 1.2 * side], [5, 0]])
+        turn = tracks.from_waypoints([[0, 0], [0.2, 0], [2.5, 1.8 * side], [5, 0]])
         trace = training.test(config, params, both, turn, 1200, seeds=np.concatenate([seeds, seeds]))
         failures.append(trace.failed.sum(axis=1))
     failures = np.stack(failures)  # (side, untrained seeds then trained seeds)
     before, after = failures[:, :4], failures[:, 4:]
     assert (before >= 1).all()  # untrained: every seed loses every turn
-    assert (after == 0).sum() >= 3 and after.sum() < before.sum()
+    assert (after == 0).sum() >= 6 and after.sum() < before.sum()
 
 
 def _spikejax(*args):

@@ -78,7 +78,7 @@ from brax.envs.base import Env, State
 
 from robots.snake import camera as cam
 from robots.snake import tracks
-from robots.snake.gait import GaitParams, gait_params, gait_period, joint_targets
+from robots.snake.gait import GaitParams, gait_params, gait_period, joint_targets, swing_correction
 from robots.snake.physics import joint_qpos_index, make_physics
 from spikejax.errors import UserError
 from spikejax.vision import dvs, render
@@ -115,6 +115,9 @@ class SnakeEnvParams(NamedTuple):
         event_threshold: frame-difference threshold on grey levels in (0, 1].
         steer_threshold: ``|C_o|`` of the smallest nonzero action, rad
             (`steering_offset`); 0 maps the action linearly.
+        head_swing_amplitude, head_swing_phase: the phase-locked correction
+            of the head compensation (`robots.snake.gait.swing_correction`),
+            rad; amplitude 0 (the default) leaves the kinematic compensation alone.
     """
 
     max_steer: jax.Array
@@ -122,6 +125,8 @@ class SnakeEnvParams(NamedTuple):
     target_speed: jax.Array
     event_threshold: jax.Array
     steer_threshold: jax.Array
+    head_swing_amplitude: jax.Array = 0.0
+    head_swing_phase: jax.Array = 0.0
 
 
 def steering_offset(action, max_steer, steer_threshold=0.0):
@@ -167,6 +172,10 @@ class SnakeEnv(Env):
         steer_threshold: ``|C_o|`` at the smallest nonzero steering action,
             rad (`steering_offset`); default 0, the linear map.
         compensate: the gait's head compensation (section II-A).
+        head_swing: ``(amplitude, phase)``, rad: a phase-locked correction
+            added to that compensation (`robots.snake.gait.swing_correction`;
+            `robots.snake.head_swing.HEAD_SWING` cancels this gait's residual
+            head swing); default none.
         gait: the gait's parameters (``C_o`` is replaced by the steering).
         pipes: optional pipes in the scene (track frame, as ``render.Cylinders``).
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
@@ -190,6 +199,7 @@ class SnakeEnv(Env):
         compensate: bool = True,
         gait: GaitParams | None = None,
         pipes: render.Cylinders | None = None,
+        head_swing: tuple[float, float] = (0.0, 0.0),
         **physics_kwargs: Any,
     ):
         if event_capacity < 1:
@@ -200,6 +210,8 @@ class SnakeEnv(Env):
             raise UserError(f"target_speed must be positive, got {target_speed}")
         if not 0 <= steer_threshold < max_steer:
             raise UserError(f"steer_threshold must be in [0, max_steer = {max_steer}), got {steer_threshold}")
+        if len(head_swing) != 2:
+            raise UserError(f"head_swing is (amplitude, phase) in radians, got {head_swing!r}")
         if isinstance(track, tracks.Track):
             self._track, self.track_name = track, "waypoints"
         else:
@@ -213,7 +225,7 @@ class SnakeEnv(Env):
         self.params = SnakeEnvParams(
             *(
                 jnp.asarray(x, jnp.float32)
-                for x in (max_steer, max_head_offset, target_speed, event_threshold, steer_threshold)
+                for x in (max_steer, max_head_offset, target_speed, event_threshold, steer_threshold, *head_swing)
             )
         )
         self.compensate = bool(compensate)
@@ -298,7 +310,8 @@ class SnakeEnv(Env):
         phys = state.pipeline_state
         # A state at time 0 starts an episode, also when Brax's AutoResetWrapper put back only the physics.
         fresh = phys.time == 0.0
-        ctrl = joint_targets(self.gait, phys.time, steer, head_offset, self.compensate)
+        swing = swing_correction(self.gait, phys.time, params.head_swing_amplitude, params.head_swing_phase)
+        ctrl = joint_targets(self.gait, phys.time, steer, head_offset + swing, self.compensate)
         phys = self.physics.step(phys, ctrl)
 
         info = dict(state.info)

@@ -53,6 +53,7 @@ __all__ = [
     "gait_params",
     "gait_period",
     "head_compensation",
+    "swing_correction",
     "joint_targets",
 ]
 
@@ -163,6 +164,29 @@ def head_compensation(alpha: jax.Array) -> jax.Array:
     """
     weights = jnp.where(_ODD & (_I >= 3), 17.0 - _I, 0.0)
     return -jnp.sum(weights * alpha) / 16.0
+
+
+def swing_correction(params: GaitParams, t, amplitude, phase) -> jax.Array:
+    """A phase-locked addition to the head joint's target, ``amplitude sin(omega_o t + phase)``, rad.
+
+    `head_compensation` is kinematics: it points the head along the modules'
+    mean heading as the joint *targets* place them. The servos lag their
+    targets, and a body holding one wave does not travel along its mean
+    heading at every instant, so the head still swings about the direction
+    of travel at the gait's frequency (by 15 degrees with the default gait:
+    `robots.snake.head_swing`). This term cancels that swing's fundamental;
+    `robots.snake.head_swing.fit` finds ``(amplitude, phase)`` for a gait. It
+    fades in over the first period, as the wave itself starts from rest:
+    switched on at full amplitude it whips the head at ``t = 0``.
+
+    Args:
+        params: the gait (its ``omega_o``).
+        t: time, s (scalar, may be traced).
+        amplitude, phase: rad (may be traced; amplitude 0 gives 0).
+    """
+    period = 2 * jnp.pi / jnp.abs(params.omega_o)
+    ramp = jnp.clip(t / period, 0.0, 1.0)
+    return ramp * amplitude * jnp.sin(params.omega_o * t + phase)
 
 
 def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=True) -> jax.Array:

@@ -8,7 +8,8 @@ or over one process a core. `MujocoTrackEnv` is that env for
 `robots.snake.ppo.TrackTask` with the ``"angles"`` observation: the same MJCF
 and settings (`robots.snake.physics.load_mj_model`, 5 steps of 4 ms a control
 step), the gait of Eq. (1) of the snake R-STDP paper with its head
-compensation (`robots.snake.gait.joint_targets`), the target moved along the
+compensation (`robots.snake.gait.joint_targets`, with the env's phase-locked
+`robots.snake.gait.swing_correction`), the target moved along the
 drawn 8 as `robots.snake.tracks.advance` moves it, the angles of Eq. (12),
 the reset rule of Sec. III-B, the reward ``1 - |a_head| / 40 deg`` and the
 constants of `robots.snake.training.env_for`, each written again in NumPy
@@ -49,6 +50,12 @@ _ODD = np.arange(1, gait.N_JOINTS + 1) % 2 == 1
 _COMPENSATION = np.where(_ODD & (_I >= 3), 17.0 - _I, 0.0) / 16.0
 
 
+def swing_correction(p: gait.GaitParams, t: float, amplitude: float, phase: float) -> float:
+    """`robots.snake.gait.swing_correction` in NumPy."""
+    ramp = min(max(t * abs(p.omega_o) / (2 * np.pi), 0.0), 1.0)
+    return ramp * amplitude * np.sin(p.omega_o * t + phase)
+
+
 def joint_targets(p: gait.GaitParams, t: float, steer: float, head_offset: float) -> np.ndarray:
     """`robots.snake.gait.joint_targets` (compensated) in NumPy."""
     P = p.P_head + (p.P_tail - p.P_head) * (_I - 1) / (gait.N_JOINTS - 1)
@@ -87,6 +94,7 @@ def _constants() -> dict:
         "max_steer": float(env.params.max_steer),
         "steer_threshold": float(env.params.steer_threshold),
         "max_head": float(env.params.max_head_offset),
+        "head_swing": (float(env.params.head_swing_amplitude), float(env.params.head_swing_phase)),
         "speed": float(env.params.target_speed),
         "window": int(env.window),
         "origin": np.asarray(env.origin, np.float64),
@@ -115,7 +123,7 @@ class MujocoTrackEnv(gymnasium.Env):
             raise UserError(f"max_steps must be at least 1, got {max_steps}")
         self.dt, self.substeps, self.gait, self.window = c["dt"], c["substeps"], c["gait"], c["window"]
         self.max_steer, self.max_head, self.speed = c["max_steer"], c["max_head"], c["speed"]
-        self.steer_threshold = c["steer_threshold"]
+        self.steer_threshold, self.head_swing = c["steer_threshold"], c["head_swing"]
         self.origin, self.tracks = c["origin"], c["tracks"]
         self.model = load_mj_model("tuned")
         self.data = mujoco.MjData(self.model)
@@ -147,7 +155,8 @@ class MujocoTrackEnv(gymnasium.Env):
                 x[:] = x.astype(np.float32)
             d.time = np.float32(d.time)
             d.qacc_warmstart[:] = 0.0
-        ctrl = joint_targets(self.gait, self.data.time, steer, head_offset)
+        swing = swing_correction(self.gait, self.data.time, *self.head_swing)
+        ctrl = joint_targets(self.gait, self.data.time, steer, head_offset + swing)
         self.data.ctrl[:] = ctrl.astype(np.float32) if self.as_jax else ctrl
         mujoco.mj_step(self.model, self.data, nstep=self.substeps)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves the poses of the last substep's start

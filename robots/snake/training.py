@@ -35,6 +35,7 @@ import numpy as np
 
 from robots.snake import tracks
 from robots.snake.env import SNAKE_SPEED, SnakeEnv
+from robots.snake.head_swing import HEAD_SWING
 from robots.snake.rstdp import NetworkConfig, NetworkParams, controller, network_init
 from spikejax import rollout
 
@@ -63,8 +64,12 @@ def env_for(track="eight", **kwargs) -> SnakeEnv:
     The steering range at ``D_body = 1`` is unstated (SPEC U23); `MAX_STEER`
     was the widest that kept a frozen hand-made mapping on the 8 (wider ranges
     wound Eq. (5)'s integrator into oscillations, and 0.25 rad nearly stops
-    the slithering).
+    the slithering). The head's residual swing is cancelled
+    (`robots.snake.head_swing.HEAD_SWING`): the basic network has no head
+    controller, and without it the target sweeps 30 degrees across its view
+    every gait period.
     """
+    kwargs.setdefault("head_swing", HEAD_SWING)
     kwargs.setdefault("drawn", True)
     kwargs.setdefault("max_steer", MAX_STEER)
     kwargs.setdefault("compact_events", False)

@@ -1,0 +1,59 @@
+"""The head's residual swing and its phase-locked correction (`robots.snake.head_swing`, `gait.swing_correction`)."""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from robots.snake import head_swing
+from robots.snake.env import SnakeEnv
+from robots.snake.gait import gait_params, gait_period, swing_correction
+from spikejax.errors import UserError
+
+
+def test_fundamental_recovers_a_sine_and_composes_with_a_correction():
+    omega = 2 * math.pi / 2.5
+    t = np.arange(0, 25, 0.02)
+    x = 0.3 * np.sin(omega * t + 0.7) + 0.05
+    z = head_swing.fundamental(x, t, omega)
+    assert abs(z) == pytest.approx(0.3, rel=1e-9)
+    assert np.angle(z) == pytest.approx(0.7, abs=1e-9)
+    # a correction c in the same form cancels it exactly when c = -z
+    corrected = x + abs(-z) * np.sin(omega * t + np.angle(-z))
+    assert abs(head_swing.fundamental(corrected, t, omega)) < 1e-9
+
+
+def test_swing_correction_fades_in_over_one_period():
+    gait = gait_params()
+    period = float(gait_period(gait))
+    amp, phase = 0.2, 1.1
+    assert float(swing_correction(gait, 0.0, amp, phase)) == 0.0
+    t = 0.5 * period
+    assert float(swing_correction(gait, t, amp, phase)) == pytest.approx(
+        0.5 * amp * math.sin(float(gait.omega_o) * t + phase), rel=1e-5
+    )
+    t = 2.3 * period
+    assert float(swing_correction(gait, t, amp, phase)) == pytest.approx(
+        amp * math.sin(float(gait.omega_o) * t + phase), rel=1e-5
+    )
+    assert float(swing_correction(gait, t, 0.0, phase)) == 0.0
+
+
+def test_head_swing_cancels_the_residual_swing():
+    """Without the correction the head swings 15 degrees about the target ahead; `HEAD_SWING` leaves under 1."""
+    z = head_swing.swing([(0.0, 0.0), head_swing.HEAD_SWING])
+    before, after = np.degrees(np.abs(z))
+    assert 13.0 < before < 17.0
+    assert after < 1.0
+
+
+def test_bad_head_swing_is_one_line_error():
+    with pytest.raises(UserError, match="head_swing"):
+        SnakeEnv("ladder", camera=False, head_swing=(0.1,))
+
+
+def test_default_env_has_no_correction():
+    env = SnakeEnv("ladder", camera=False)
+    assert float(env.params.head_swing_amplitude) == 0.0
+    assert jnp.asarray(env.params.head_swing_phase).dtype == jnp.float32
