@@ -242,15 +242,18 @@ def test(
     return run_test(controller(config), params, networks, track, steps, seeds=seeds)
 
 
-def run_test(ctrl, params, cstates, track: str | tracks.Track, steps: int | None = None, *, seeds) -> TestTrace:
+def run_test(
+    ctrl, params, cstates, track: str | tracks.Track, steps: int | None = None, *, seeds, env_kwargs=None
+) -> TestTrace:
     """Any controller on one pass of ``track``, a failure restarting it: every control step recorded, per member.
 
     ``ctrl`` is a `spikejax.rollout.Controller` whose ``out`` has ``d_body``
     and ``d_head``; ``cstates`` its batched states, one member per seed (a
     controller with nothing random ignores the seed's key). A lone member runs
-    as a batch of two copies (see the module docstring).
+    as a batch of two copies (see the module docstring). ``env_kwargs`` go to
+    `env_for` (e.g. ``head_swing=(0.0, 0.0)`` for the uncorrected head).
     """
-    env = env_for(track)
+    env = env_for(track, **(env_kwargs or {}))
     steps = pass_steps(env) if steps is None else steps
     seeds, n = _padded(seeds)
     if n == 1:
