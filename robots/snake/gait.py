@@ -184,8 +184,7 @@ def swing_correction(params: GaitParams, t, amplitude, phase) -> jax.Array:
         t: time, s (scalar, may be traced).
         amplitude, phase: rad (may be traced; amplitude 0 gives 0).
     """
-    period = 2 * jnp.pi / jnp.abs(params.omega_o)
-    ramp = jnp.clip(t / period, 0.0, 1.0)
+    ramp = jnp.clip(t / gait_period(params), 0.0, 1.0)
     return ramp * amplitude * jnp.sin(params.omega_o * t + phase)
 
 

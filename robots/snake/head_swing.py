@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from robots.snake.env import SnakeEnv
+from robots.snake.env import SnakeEnv, rollout
 from robots.snake.gait import gait_period
 
 __all__ = ["HEAD_SWING", "fundamental", "swing", "fit"]
@@ -61,8 +61,6 @@ def swing(corrections, *, env: SnakeEnv | None = None) -> np.ndarray:
     ``env`` defaults to the ladder without a camera; every correction runs as
     one member of a ``vmap`` with the env's traced ``head_swing`` parameters.
     """
-    from robots.snake.env import rollout
-
     env = SnakeEnv("ladder", drawn=True, camera=False) if env is None else env
     per = int(round(float(gait_period(env.gait)) / env.dt))
     steps = (SKIP_PERIODS + PERIODS) * per
