@@ -172,6 +172,22 @@ def test_render_vmaps_over_camera_poses():
     assert _disc(batch[1])[0] > _disc(batch[0])[0] + 5
 
 
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_a_band_of_rows_is_those_rows_of_the_whole_frame_exactly(supersample):
+    camera = render.Camera(width=64, height=48, supersample=supersample)
+    scene = render.Scene(
+        render.spheres(jnp.array([2.0, 0.1, 0.2]), 0.3, 0.05), render.no_cylinders(), ground_height=-0.4
+    )
+    rot = jnp.asarray(_yaw(0.2), jnp.float32)
+    whole = jax.jit(lambda: render.render(scene, jnp.zeros(3), rot, camera))()
+    band = jax.jit(lambda: render.render(scene, jnp.zeros(3), rot, camera, rows=(10, 30)))()
+    assert band.shape == (20, 64)
+    np.testing.assert_array_equal(band, whole[10:30])
+    assert np.ptp(np.asarray(band)) > 0.3  # the band holds sphere, sky and ground
+    with pytest.raises(UserError, match="rows must be"):
+        render.render(scene, jnp.zeros(3), rot, camera, rows=(30, 10))
+
+
 def test_bad_camera_is_a_user_error():
     with pytest.raises(UserError, match="field of view"):
         render.Camera(fov=4.0).validate()

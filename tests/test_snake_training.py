@@ -24,6 +24,43 @@ def test_a_seed_trains_to_the_same_weights_alone_or_in_a_batch_of_64():
     np.testing.assert_array_equal(alone.records["mean"]["abs_head"][0], batch.records["mean"]["abs_head"][5])
 
 
+def test_env_for_renders_only_the_rois_rows_and_the_grid_counts_are_the_whole_frames():
+    from spikejax import coding
+
+    config = rstdp.NetworkConfig()
+    band, whole = training.env_for("zigzag"), training.env_for("zigzag", frame_rows=None)
+    assert band.frame_rows == tuple(config.roi[:2])
+
+    def frames(env):
+        def body(state, t):
+            state = env.step(state, jax.numpy.array([jax.numpy.sin(0.1 * t), 0.0]))
+            return state, (state.info["prev_frame"], state.info["frame"])
+
+        return jax.lax.scan(body, env.reset(jax.random.PRNGKey(0)), jax.numpy.arange(40.0))[1]
+
+    (p_band, f_band), (p_whole, f_whole) = jax.jit(lambda: frames(band))(), jax.jit(lambda: frames(whole))()
+    r0, r1 = config.roi[:2]
+    np.testing.assert_array_equal(f_band[:, r0:r1], f_whole[:, r0:r1])
+    assert not np.asarray(f_band[:, :r0]).any() and not np.asarray(f_band[:, r1:]).any()
+    count = jax.vmap(
+        lambda p, f: coding.grid_counts(p, f, threshold=0.05, roi=config.roi, rows=config.rows, cols=config.cols)
+    )
+    counts = np.asarray(count(p_band, f_band))
+    np.testing.assert_array_equal(counts, count(p_whole, f_whole))
+    assert counts.sum() > 100  # the target moved in the ROI
+
+
+def test_a_network_whose_roi_reaches_beyond_the_rendered_rows_is_refused_in_one_line():
+    from spikejax.errors import UserError
+
+    config = rstdp.NetworkConfig(roi=(8, 56, 4, 124))
+    with pytest.raises(UserError, match="reach beyond the rows the env renders") as e:
+        training.train(
+            config, rstdp.network_params(config), np.arange(2), training.BLOCK, env=training.env_for("eight")
+        )
+    assert "\n" not in str(e.value)
+
+
 def test_a_completed_episode_runs_the_next_one_mirrored_and_keeps_the_weights():
     short = tracks.from_waypoints([[0.0, 0.0], [0.3, 0.0]])  # the target reaches its end within seconds
     env = training.env_for(short)
@@ -121,6 +158,25 @@ def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
         str(tmp_path / "ev"),
     )
     assert r.returncode == 2 and "at least two" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow  # 2 min: compiles the programs in two worker processes
+def test_reproduce_gives_the_same_files_on_one_worker_or_two(tmp_path):
+    from robots.snake import reproduce_rstdp
+
+    kw = dict(seeds=3, train_laps=0.01, topologies=("basic",), test_steps=40, progress=False)
+    reproduce_rstdp.run(tmp_path / "one", workers=1, **kw)
+    reproduce_rstdp.run(tmp_path / "two", workers=2, **kw)
+    files = sorted(
+        p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*.npz") if "checkpoints" not in p.parts
+    )
+    assert len(files) == 6 and not (tmp_path / "two" / "parts").exists()
+    for f in files:
+        with np.load(tmp_path / "one" / f) as a, np.load(tmp_path / "two" / f) as b:
+            assert a.files == b.files
+            for k in a.files:
+                np.testing.assert_array_equal(a[k], b[k], err_msg=f"{f}: {k}")
+    assert sorted(p.name for p in (tmp_path / "two" / "checkpoints" / "basic").iterdir()) == ["seeds-0-2", "seeds-2-3"]
 
 
 @pytest.mark.slow

@@ -69,7 +69,16 @@ def pose(phys) -> tuple[jax.Array, jax.Array]:
     return phys.head_pos, phys.head_mat
 
 
-def frame(phys, world: render.Scene, camera: render.Camera = HEAD_CAMERA) -> jax.Array:
-    """The head camera's ``(128, 128)`` grey-level frame of ``world`` for the physics state ``phys``."""
+def frame(
+    phys, world: render.Scene, camera: render.Camera = HEAD_CAMERA, rows: tuple[int, int] | None = None
+) -> jax.Array:
+    """The head camera's ``(128, 128)`` grey-level frame of ``world`` for the physics state ``phys``.
+
+    ``rows = (row0, row1)``: only those rows are rendered; the others are 0,
+    a band that never changes and so never makes an event.
+    """
     pos, rot = pose(phys)
-    return render.render(world, pos, rot, camera)
+    if rows is None:
+        return render.render(world, pos, rot, camera)
+    band = render.render(world, pos, rot, camera, rows=rows)
+    return jnp.zeros((camera.height, camera.width), band.dtype).at[rows[0] : rows[1]].set(band)

@@ -172,6 +172,10 @@ class SnakeEnv(Env):
         steer_threshold: ``|C_o|`` at the smallest nonzero steering action,
             rad (`steering_offset`); default 0, the linear map.
         compensate: the gait's head compensation (section II-A).
+        frame_rows: ``(row0, row1)``: render only those rows of the head
+            camera's frame, the others left at 0 (no events); for controllers
+            that read a band of the image (Eq. (2)'s region of interest).
+            Default: the whole frame.
         head_swing: ``(amplitude, phase)``, rad: a phase-locked correction
             added to that compensation (`robots.snake.gait.swing_correction`;
             `robots.snake.head_swing.HEAD_SWING` cancels this gait's residual
@@ -200,6 +204,7 @@ class SnakeEnv(Env):
         gait: GaitParams | None = None,
         pipes: render.Cylinders | None = None,
         head_swing: tuple[float, float] = (0.0, 0.0),
+        frame_rows: tuple[int, int] | None = None,
         **physics_kwargs: Any,
     ):
         if event_capacity < 1:
@@ -212,6 +217,14 @@ class SnakeEnv(Env):
             raise UserError(f"steer_threshold must be in [0, max_steer = {max_steer}), got {steer_threshold}")
         if len(head_swing) != 2:
             raise UserError(f"head_swing is (amplitude, phase) in radians, got {head_swing!r}")
+        if frame_rows is not None:
+            height = cam.HEAD_CAMERA.height
+            if len(frame_rows) != 2 or not 0 <= int(frame_rows[0]) < int(frame_rows[1]) <= height:
+                raise UserError(
+                    f"frame_rows must be (row0, row1) with 0 <= row0 < row1 <= {height}, got {frame_rows!r}"
+                )
+            frame_rows = (int(frame_rows[0]), int(frame_rows[1]))
+        self.frame_rows = frame_rows
         if isinstance(track, tracks.Track):
             self._track, self.track_name = track, "waypoints"
         else:
@@ -393,7 +406,7 @@ class SnakeEnv(Env):
         pipes = None
         if self.pipes is not None:
             pipes = self.pipes._replace(center=self.pipes.center + jnp.concatenate([self.origin, jnp.zeros(1)]))
-        return cam.frame(phys, cam.scene(target_xy, pipes))
+        return cam.frame(phys, cam.scene(target_xy, pipes), rows=self.frame_rows)
 
     def _obs(self, phys, a_head, a_body):
         return jnp.concatenate([jnp.stack([a_head, a_body]), phys.qpos[self._joints]])

@@ -66,6 +66,7 @@ import dataclasses
 import functools
 import os
 import pathlib
+import queue
 import threading
 from typing import Callable, NamedTuple
 
@@ -573,7 +574,11 @@ class _CRunner:
         if model.nmocap:
             self.control_spec |= mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT
         self.nmocap = model.nmocap
-        self.data = mujoco.MjData(model)
+        # MjDatas for callers stepping on their own thread (each JAX CPU device its shard, at once). Made here:
+        # MuJoCo crashed making one on a callback's thread.
+        self.free = queue.SimpleQueue()
+        for _ in range(max(2, os.cpu_count() or 1)):
+            self.free.put(mujoco.MjData(model))
         self.datas = [mujoco.MjData(model) for _ in range(nthread)]
         self.pool = mj_rollout.Rollout(nthread=nthread) if nthread > 1 else None
         self.buffers = {}
@@ -581,14 +586,18 @@ class _CRunner:
         self.nq, self.nv, self.na = model.nq, model.nv, model.na
 
     def _serial(self, state: np.ndarray, control: np.ndarray) -> np.ndarray:
-        model, data, spec = self.model, self.data, self.spec
-        out = np.empty_like(state)
-        for b in range(state.shape[0]):
-            mujoco.mj_setState(model, data, state[b], spec)
-            data.qacc_warmstart[:] = 0.0
-            mujoco.mj_setState(model, data, control[b], self.control_spec)
-            mujoco.mj_step(model, data, nstep=self.substeps)
-            mujoco.mj_getState(model, data, out[b], spec)
+        model, spec = self.model, self.spec
+        data = self.free.get()
+        try:
+            out = np.empty_like(state)
+            for b in range(state.shape[0]):
+                mujoco.mj_setState(model, data, state[b], spec)
+                data.qacc_warmstart[:] = 0.0
+                mujoco.mj_setState(model, data, control[b], self.control_spec)
+                mujoco.mj_step(model, data, nstep=self.substeps)
+                mujoco.mj_getState(model, data, out[b], spec)
+        finally:
+            self.free.put(data)
         return out
 
     def _threaded(self, state: np.ndarray, control: np.ndarray) -> np.ndarray:
@@ -638,11 +647,11 @@ class _CRunner:
             ],
             axis=1,
         )
-        with self.lock:
-            if self.pool is not None and n >= self.nthread:
+        if self.pool is not None and n >= self.nthread:
+            with self.lock:  # one pool, shared by every caller
                 final = self._threaded(state, control)
-            else:
-                final = self._serial(state, control)
+        else:
+            final = self._serial(state, control)
         final = final.astype(np.float32)
         i = np.cumsum([1, self.nq, self.nv])
         return (

@@ -91,6 +91,8 @@ class TrackTask(Wrapper):
         super().__init__(env)
         self.observation = observation
         self.network = NetworkConfig() if network is None else network
+        if observation == "grid":
+            training.check_frame_rows(env, self.network.roi)
 
     @property
     def observation_size(self) -> int:

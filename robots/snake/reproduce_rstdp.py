@@ -4,7 +4,8 @@
 the separated net with Eq. (13) as printed, ``separated/printed``, beside the
 default sign of Eq. (10)) for
 ``--train-laps`` passes of the 8 (`robots.snake.training.train`, all seeds in
-one vmapped program, checkpointed so a killed run resumes), tests the frozen
+one vmapped program per worker process, ``--workers``, one a core, each a
+share of the seeds; checkpointed so a killed run resumes), tests the frozen
 networks on one pass of each test track (ladder, zigzag and their mirror
 images) and writes, in ``--out``:
 
@@ -31,6 +32,7 @@ the test's failures per minute and mean head angle over the grid.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -185,25 +187,172 @@ def test_rows(topology: str, track_name: str, trace: training.TestTrace, dt: flo
     return rows
 
 
-def _progress_bar(desc: str, total: int, enabled: bool):
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, desc=desc, unit="step", disable=not enabled)
-
-    def update(done, total):
-        bar.n = done
-        bar.refresh()
-        if done >= total:
-            bar.close()
-
-    return update
-
-
 def training_steps(env, train_laps: float, chunk_steps: int | None = None) -> tuple[int, int]:
     """Control steps of a training of ``train_laps`` passes of the 8 (whole blocks, whole chunks), and the chunk."""
     steps = int(np.ceil(train_laps * training.lap_steps(env) / training.BLOCK) * training.BLOCK)
     chunk = min(steps, chunk_steps or 20 * training.BLOCK)
     return int(np.ceil(steps / chunk) * chunk), chunk
+
+
+def _name(topology: str) -> str:
+    return topology.replace("/", "-")
+
+
+@functools.lru_cache(maxsize=None)
+def _test_length(name: str, test_steps: int | None) -> int:
+    return test_steps or training.pass_steps(training.env_for(name, camera=False))
+
+
+def _save_npz(path: Path, **arrays) -> None:
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **arrays)
+    tmp.replace(path)
+
+
+def _load_npz(path: Path) -> dict:
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def run_share(
+    out: Path, topology: str, start: int, stop: int, steps: int, chunk: int, fingerprint: str, test_steps, progress=None
+) -> None:
+    """Seeds ``start .. stop - 1`` of one topology: trained (unless ``out``'s weights have them) and tested.
+
+    Writes ``out/parts/TOPOLOGY/seeds-START-STOP/``: the share's training
+    records and weights, and a test trace per track (unless ``out/tests``
+    has the whole trace); `run` merges the shares. Each file is written
+    atomically and skipped when present, so a killed share resumes (its
+    training from its checkpoints). ``progress(phase, done, total)``, if
+    given, is called as training advances (``"train"``) and after each test
+    track (``"test"``).
+    """
+    config = _config(topology)
+    params = rstdp.network_params(config)
+    seeds = np.arange(start, stop)
+    part = out / "parts" / _name(topology) / f"seeds-{start}-{stop}"
+    part.mkdir(parents=True, exist_ok=True)
+    merged = out / "weights" / f"{_name(topology)}.npz"
+    if merged.exists():
+        _, _, w1, w2 = load_weights(merged)
+        w1, w2 = w1[start:stop], w2[start:stop]
+    else:
+        if not (part / "weights.npz").exists():
+            result = training.train(
+                config,
+                params,
+                seeds,
+                steps,
+                env=training.env_for("eight"),
+                chunk_steps=chunk,
+                directory=out / "checkpoints" / _name(topology) / f"seeds-{start}-{stop}",
+                fingerprint=json.dumps([fingerprint, start, stop]),
+                progress=None if progress is None else (lambda done, total: progress("train", done, total)),
+            )
+            _save_npz(part / "training.npz", **_flatten(jax.device_get(result.records)))
+            save_weights(part / "weights.npz", topology, seeds, result.loop, fingerprint)
+        _, _, w1, w2 = load_weights(part / "weights.npz")
+    nets = networks_with(config, params, seeds, w1, w2)
+    for i, name in enumerate(TEST_TRACKS):
+        length = _test_length(name, test_steps)
+        whole = out / "tests" / f"{_name(topology)}-{name}-{length}.npz"
+        piece = part / f"test-{name}-{length}.npz"
+        if not whole.exists() and not piece.exists():
+            trace = training.test(config, params, nets, name, test_steps, seeds=seeds)
+            _save_npz(piece, **trace._asdict())
+        if progress is not None:
+            progress("test", i + 1, len(TEST_TRACKS))
+
+
+def _merge_shares(out: Path, topology: str, ranges, seeds: int, fingerprint: str, test_steps) -> None:
+    """The shares' files of one topology as the whole run's (seed order), then the shares removed."""
+    import shutil
+
+    parts = [out / "parts" / _name(topology) / f"seeds-{a}-{b}" for a, b in ranges]
+    weights = out / "weights" / f"{_name(topology)}.npz"
+    if not weights.exists():
+        records = [_load_npz(p / "training.npz") for p in parts]
+        _save_npz(
+            out / "training" / f"{_name(topology)}.npz",
+            **{k: np.concatenate([r[k] for r in records]) for k in records[0]},
+        )
+        loaded = [load_weights(p / "weights.npz") for p in parts]
+        _save_npz(
+            weights,
+            topology=topology,
+            seeds=np.arange(seeds),
+            w_first=np.concatenate([w[2] for w in loaded]),
+            w_hidden=np.concatenate([w[3] for w in loaded]),
+            training=fingerprint,
+        )
+    for name in TEST_TRACKS:
+        length = _test_length(name, test_steps)
+        whole = out / "tests" / f"{_name(topology)}-{name}-{length}.npz"
+        if not whole.exists():
+            traces = [_load_npz(p / f"test-{name}-{length}.npz") for p in parts]
+            _save_npz(whole, **{k: np.concatenate([t[k] for t in traces]) for k in traces[0]})
+    shutil.rmtree(out / "parts" / _name(topology), ignore_errors=True)
+
+
+class _Bars:
+    """A topology's training and test progress bars, summed over its shares."""
+
+    def __init__(self, topology: str, steps: int, n_shares: int, enabled: bool):
+        from tqdm import tqdm
+
+        self.done = {}
+        self.bars = {
+            "train": tqdm(total=steps * n_shares, desc=f"train {topology}", unit="step", disable=not enabled),
+            "test": tqdm(total=len(TEST_TRACKS) * n_shares, desc=f"test {topology}", unit="track", disable=not enabled),
+        }
+
+    def update(self, share: int, phase: str, done: int) -> None:
+        self.done[share, phase] = done
+        bar = self.bars[phase]
+        bar.n = sum(v for (_, p), v in self.done.items() if p == phase)
+        bar.refresh()
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+
+
+def _share_in_worker(queue, index, *args) -> None:
+    run_share(*args, progress=lambda phase, done, total: queue.put((index, phase, done)))
+
+
+def _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, bars, executor) -> None:
+    """Every share of one topology: in this process (``executor`` None) or one a worker, progress drawn here."""
+    if executor is None:
+        for i, (a, b) in enumerate(ranges):
+            run_share(
+                out,
+                topology,
+                a,
+                b,
+                steps,
+                chunk,
+                fingerprint,
+                test_steps,
+                progress=lambda phase, done, total, i=i: bars.update(i, phase, done),
+            )
+        return
+    import multiprocessing
+    import queue as queues
+
+    with multiprocessing.get_context("spawn").Manager() as manager:
+        q = manager.Queue()
+        futures = [
+            executor.submit(_share_in_worker, q, i, out, topology, a, b, steps, chunk, fingerprint, test_steps)
+            for i, (a, b) in enumerate(ranges)
+        ]
+        while not all(f.done() for f in futures):
+            try:
+                bars.update(*q.get(timeout=0.5))
+            except queues.Empty:
+                pass
+        for f in futures:
+            f.result()  # a share's exception, raised here
 
 
 def run(
@@ -215,58 +364,58 @@ def run(
     test_steps: int | None = None,
     chunk_steps: int | None = None,
     progress: bool = True,
+    workers: int | None = 1,
 ) -> list[list]:
-    """Train, test, write everything in the module docstring; returns the table's rows."""
+    """Train, test, write everything in the module docstring; returns the table's rows.
+
+    ``workers``: processes, one a core (`spikejax.workers.pool`), each
+    training and testing a contiguous share of the seeds; 1 runs everything
+    in this process, None one a core. The results do not depend on it.
+    """
+    from spikejax import workers as pools
+
     (out / "weights").mkdir(parents=True, exist_ok=True)
     (out / "training").mkdir(exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
     (out / "tests").mkdir(exist_ok=True)
-    seed_list = np.arange(seeds)
     env = training.env_for("eight")
     steps, chunk = training_steps(env, train_laps, chunk_steps)
+    ranges = pools.shares(seeds, pools.workers_for_run(workers))
     rows, traces, train_records = [], {}, {}
-    for topology in topologies:
-        config, t0 = _config(topology), time.time()
-        params = rstdp.network_params(config)
-        weights = out / "weights" / f"{topology.replace('/', '-')}.npz"
-        fingerprint = json.dumps([dataclasses.asdict(config), seeds, steps, chunk])
-        if weights.exists() and _trained_with(weights) != fingerprint:
-            raise UserError(
-                f"{weights} was trained with other settings (seeds, --train-laps or the topology's); give another --out"
+    executor = pools.pool(len(ranges)) if len(ranges) > 1 else None
+    try:
+        for topology in topologies:
+            config, t0 = _config(topology), time.time()
+            weights = out / "weights" / f"{_name(topology)}.npz"
+            fingerprint = json.dumps([dataclasses.asdict(config), seeds, steps, chunk])
+            if weights.exists() and _trained_with(weights) != fingerprint:
+                raise UserError(
+                    f"{weights} was trained with other settings (seeds, --train-laps or the topology's); "
+                    "give another --out"
+                )
+            lengths = [_test_length(name, test_steps) for name in TEST_TRACKS]
+            tested = all(
+                (out / "tests" / f"{_name(topology)}-{name}-{n}.npz").exists() for name, n in zip(TEST_TRACKS, lengths)
             )
-        if not weights.exists():
-            result = training.train(
-                config,
-                params,
-                seed_list,
-                steps,
-                env=env,
-                chunk_steps=chunk,
-                directory=out / "checkpoints" / topology.replace("/", "-"),
-                fingerprint=fingerprint,
-                progress=_progress_bar(f"train {topology}", steps, progress),
-            )
-            np.savez(out / "training" / f"{topology.replace('/', '-')}.npz", **_flatten(jax.device_get(result.records)))
-            save_weights(weights, topology, seed_list, result.loop, fingerprint)
-        _, saved_seeds, w1, w2 = load_weights(weights)
-        with np.load(out / "training" / f"{topology.replace('/', '-')}.npz") as z:
-            train_records[topology] = dict(z)
-        nets = networks_with(config, params, saved_seeds, w1, w2)
-        for name in TEST_TRACKS:
-            length = test_steps or training.pass_steps(training.env_for(name, camera=False))
-            cache = out / "tests" / f"{topology.replace('/', '-')}-{name}-{length}.npz"
-            if cache.exists():
-                with np.load(cache) as z:
-                    trace = training.TestTrace(**{k: z[k] for k in training.TestTrace._fields})
-            else:
-                trace = training.test(config, params, nets, name, test_steps, seeds=saved_seeds)
-                tmp = cache.with_suffix(".tmp.npz")
-                np.savez(tmp, **trace._asdict())
-                tmp.replace(cache)
-            traces[topology, name] = trace
-            rows += test_rows(topology, name, trace, env.dt, _windows(env))
-        if progress:
-            print(f"{topology}: {time.time() - t0:.0f} s")
+            if not (weights.exists() and tested):
+                bars = _Bars(topology, steps, len(ranges), progress)
+                try:
+                    _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, bars, executor)
+                finally:
+                    bars.close()
+                _merge_shares(out, topology, ranges, seeds, fingerprint, test_steps)
+            train_records[topology] = _load_npz(out / "training" / f"{_name(topology)}.npz")
+            for name, length in zip(TEST_TRACKS, lengths):
+                trace = _load_npz(out / "tests" / f"{_name(topology)}-{name}-{length}.npz")
+                traces[topology, name] = trace = training.TestTrace(**{k: trace[k] for k in training.TestTrace._fields})
+                rows += test_rows(topology, name, trace, env.dt, _windows(env))
+            if progress:
+                print(f"{topology}: {time.time() - t0:.0f} s")
+    finally:
+        if executor is not None:
+            executor.shutdown(cancel_futures=True)
+    if (out / "parts").exists() and not any((out / "parts").iterdir()):
+        (out / "parts").rmdir()
     write_csv(out / "snake_rstdp.csv", [dict(zip(HEADER, r)) for r in rows], HEADER)
     _plot_training(out / "snake_rstdp_training.png", train_records, env.dt)
     _plot_weights(out / "snake_rstdp_weights.png", train_records, env.dt)
@@ -486,16 +635,29 @@ def _add_reproduce_arguments(parser) -> None:
     parser.add_argument(
         "--test-steps", type=count, default=None, help="control steps per test track (default: one pass)"
     )
+    parser.add_argument(
+        "--workers",
+        type=count,
+        default=None,
+        help="processes, one a core, each training and testing a share of the seeds (default: one per core; "
+        "the results do not depend on it)",
+    )
 
 
-def run_reproduce(*, out, seeds, train_laps, topologies, test_steps, no_progress) -> int:
+def run_reproduce(*, out, seeds, train_laps, topologies, test_steps, no_progress, workers=None) -> int:
     """``spikejax reproduce snake-rstdp --out DIR``: `run`, and its table printed."""
     if not train_laps > 0:
         raise UserError(f"--train-laps must be positive, got {train_laps}")
     names = _topologies(topologies)
     with output_directory(out, command="reproduce snake-rstdp") as out:
         rows = run(
-            out, seeds=seeds, train_laps=train_laps, topologies=names, test_steps=test_steps, progress=not no_progress
+            out,
+            seeds=seeds,
+            train_laps=train_laps,
+            topologies=names,
+            test_steps=test_steps,
+            progress=not no_progress,
+            workers=workers,
         )
         _print(rows)
         print(f"wrote {out}/snake_rstdp.csv, weights/, training/, snake_rstdp_*.png")

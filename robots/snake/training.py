@@ -38,6 +38,7 @@ from robots.snake.env import SNAKE_SPEED, SnakeEnv
 from robots.snake.head_swing import HEAD_SWING
 from robots.snake.rstdp import NetworkConfig, NetworkParams, controller, network_init
 from spikejax import rollout
+from spikejax.errors import UserError
 
 __all__ = [
     "BLOCK",
@@ -53,6 +54,7 @@ __all__ = [
 ]
 
 BLOCK = 50  # control steps (1 s) per training record
+FRAME_ROWS = NetworkConfig.roi[:2]  # the rows env_for renders: those of Eq. (2)'s default ROI
 
 
 MAX_STEER = 0.125  # rad: C_o at D_body = 1; 0.25 stalls the gait, 0.15 and above oscillates under Eq. (5)
@@ -64,16 +66,29 @@ def env_for(track="eight", **kwargs) -> SnakeEnv:
     The steering range at ``D_body = 1`` is unstated (SPEC U23); `MAX_STEER`
     was the widest that kept a frozen hand-made mapping on the 8 (wider ranges
     wound Eq. (5)'s integrator into oscillations, and 0.25 rad nearly stops
-    the slithering). The head's residual swing is cancelled
+    the slithering). Only `FRAME_ROWS` of the camera's frame are rendered
+    (`check_frame_rows` refuses a network whose ROI reaches beyond them).
+    The head's residual swing is cancelled
     (`robots.snake.head_swing.HEAD_SWING`): the basic network has no head
     controller, and without it the target sweeps 30 degrees across its view
     every gait period.
     """
+    kwargs.setdefault("frame_rows", FRAME_ROWS)
     kwargs.setdefault("head_swing", HEAD_SWING)
     kwargs.setdefault("drawn", True)
     kwargs.setdefault("max_steer", MAX_STEER)
     kwargs.setdefault("compact_events", False)
     return SnakeEnv(track, **kwargs)
+
+
+def check_frame_rows(env: SnakeEnv, roi) -> None:
+    """Raises a one-line `UserError` if ``env`` renders rows that miss part of ``roi`` ``(row0, row1, col0, col1)``."""
+    rows = env.frame_rows
+    if env.camera_on and rows is not None and not rows[0] <= roi[0] < roi[1] <= rows[1]:
+        raise UserError(
+            f"the ROI's rows {roi[0]}-{roi[1]} reach beyond the rows the env renders ({rows[0]}-{rows[1]}); "
+            f"build it with frame_rows=({roi[0]}, {roi[1]}) or None"
+        )
 
 
 def lap_steps(env: SnakeEnv, slack: float = 1.25) -> int:
@@ -180,7 +195,8 @@ def train(
     turned left and the networks learned a bias to the left (``D_body`` pinned
     at -1 on straight test tracks).
     """
-    env = env_for("eight") if env is None else env
+    env = env_for("eight", frame_rows=config.roi[:2]) if env is None else env
+    check_frame_rows(env, config.roi)
     seeds, n = _padded(seeds)
     initial, loop = _members(env, config, params, seeds, False)
     ctrl = controller(config)
@@ -239,7 +255,8 @@ def test(
     import dataclasses
 
     config = dataclasses.replace(config, learn=False)
-    return run_test(controller(config), params, networks, track, steps, seeds=seeds)
+    env_kwargs = {"frame_rows": config.roi[:2]}
+    return run_test(controller(config), params, networks, track, steps, seeds=seeds, env_kwargs=env_kwargs)
 
 
 def run_test(

@@ -500,28 +500,48 @@ def intersect(scene: Scene, origin, dirs) -> tuple[jax.Array, jax.Array]:
     return t_best, jnp.clip(bright, 0.0, 1.0)
 
 
-def _world_directions(camera: Camera, rot) -> jax.Array:
-    """The camera's ray directions (`ray_directions`) rotated into the world frame, ``(h, w, 3)``."""
+def _world_directions(camera: Camera, rot, rows: tuple[int, int] | None = None) -> jax.Array:
+    """The camera's ray directions (`ray_directions`) rotated into the world frame, ``(h, w, 3)``.
+
+    ``rows``: only the rays of those image rows (supersampled rows included).
+    """
     local = _local_directions(camera)
+    if rows is not None:
+        s = camera.supersample
+        local = local[rows[0] * s : rows[1] * s]
     rot = jnp.asarray(rot, jnp.float32)
     return jnp.stack(
         [local[..., 0] * rot[k, 0] + local[..., 1] * rot[k, 1] + local[..., 2] * rot[k, 2] for k in range(3)], axis=-1
     )
 
 
-def render(scene: Scene, cam_pos, rot, camera: Camera = Camera()) -> jax.Array:
+def render(scene: Scene, cam_pos, rot, camera: Camera = Camera(), *, rows: tuple[int, int] | None = None) -> jax.Array:
     """The frame the camera at ``cam_pos`` (3,) with orientation ``rot`` (3, 3) sees.
 
     ``rot``'s columns are the camera's forward, left and up axes in the world
     frame (see the module docstring). Returns ``(height, width)`` float32
     brightness in [0, 1]; with ``camera.supersample = s`` each pixel is the mean
     of an ``s x s`` grid of rays, which antialiases the edges.
+
+    ``rows = (row0, row1)`` renders only the image rows ``row0 .. row1 - 1``
+    and returns them, ``(row1 - row0, width)``: the same pixels as the whole
+    frame's, at the cost of those rows (a reader of a band of the image, such
+    as a region of interest, pays for that band only).
+
+    Raises:
+        UserError: if ``rows`` is not a non-empty range within the image.
     """
+    height = camera.height
+    if rows is not None:
+        row0, row1 = (int(r) for r in rows)
+        if not 0 <= row0 < row1 <= camera.height:
+            raise UserError(f"rows must be (row0, row1) with 0 <= row0 < row1 <= {camera.height}, got {tuple(rows)}")
+        rows, height = (row0, row1), row1 - row0
     cam_pos = jnp.asarray(cam_pos, jnp.float32)
-    _, bright = intersect(scene, cam_pos, _world_directions(camera, rot))
+    _, bright = intersect(scene, cam_pos, _world_directions(camera, rot, rows))
     s = camera.supersample
     if s > 1:
-        bright = bright.reshape(camera.height, s, camera.width, s).mean(axis=(1, 3))
+        bright = bright.reshape(height, s, camera.width, s).mean(axis=(1, 3))
     return bright
 
 
