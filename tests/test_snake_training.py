@@ -88,6 +88,23 @@ def test_frozen_networks_do_not_change_and_the_trace_covers_every_step():
     np.testing.assert_array_equal(trace.a_head, again.a_head)  # deterministic given the seeds
 
 
+def test_a_track_and_its_mirror_in_one_batch_are_the_two_tracks_trials():
+    config = rstdp.NetworkConfig(topology="basic")
+    params = rstdp.network_params(config)
+    seeds = np.arange(2)
+    nets = jax.vmap(lambda k: rstdp.network_init(config, params, key=k))(jax.random.split(jax.random.PRNGKey(3), 2))
+    nets = nets._replace(w_first=nets.w_first * np.array([1.0, 0.2])[:, None, None])  # steers: the mirror matters
+    both = jax.tree.map(lambda x: np.concatenate([x, x]), nets)
+    turn = tracks.from_waypoints([[0.0, 0.0], [0.05, 0.0], [0.05, 1.0]])  # the target turns left at once
+    pair = training.test(config, params, both, turn, 150, seeds=np.tile(seeds, 2), mirror=[0, 0, 1, 1])
+    for k, track in enumerate((turn, tracks.mirror(turn))):
+        alone = training.test(config, params, nets, track, 150, seeds=seeds)
+        for field in training.TestTrace._fields:
+            np.testing.assert_array_equal(getattr(pair, field)[2 * k : 2 * k + 2], getattr(alone, field), err_msg=field)
+    y = pair.target_xy[:, -1, 1] - pair.target_xy[:, 0, 1]
+    assert (y[:2] > 0.1).all() and (y[2:] < -0.1).all()  # 0.18 m to either side
+
+
 @pytest.mark.slow  # 41 s: the fast suite is at its 15-minute limit
 def test_a_short_training_follows_turns_that_untrained_networks_lose():
     """100 s of training on a zigzag, then frozen on a left-right and a right-left turn, beside the untrained nets.

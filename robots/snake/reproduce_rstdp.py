@@ -253,15 +253,23 @@ def run_share(
             save_weights(part / "weights.npz", topology, seeds, result.loop, fingerprint)
         _, _, w1, w2 = load_weights(part / "weights.npz")
     nets = networks_with(config, params, seeds, w1, w2)
-    for i, name in enumerate(TEST_TRACKS):
-        length = _test_length(name, test_steps)
-        whole = out / "tests" / f"{_name(topology)}-{name}-{length}.npz"
-        piece = part / f"test-{name}-{length}.npz"
-        if not whole.exists() and not piece.exists():
-            trace = training.test(config, params, nets, name, test_steps, seeds=seeds)
-            _save_npz(piece, **trace._asdict())
+    # A track and its mirror image run as one batch of twice the seeds (the same trials as two batches).
+    for i, base in enumerate(dict.fromkeys(name.removesuffix("-mirror") for name in TEST_TRACKS)):
+        pair = (base, f"{base}-mirror")
+        length = _test_length(base, test_steps)
+        pieces = [part / f"test-{name}-{length}.npz" for name in pair]
+        done = [
+            (out / "tests" / f"{_name(topology)}-{name}-{length}.npz").exists() or p.exists()
+            for name, p in zip(pair, pieces)
+        ]
+        if not all(done):
+            both = jax.tree.map(lambda x: jnp.concatenate([x, x]), nets)
+            mirror = np.repeat([False, True], len(seeds))
+            trace = training.test(config, params, both, base, test_steps, seeds=np.tile(seeds, 2), mirror=mirror)
+            for k, piece in enumerate(pieces):
+                _save_npz(piece, **{f: v[k * len(seeds) : (k + 1) * len(seeds)] for f, v in trace._asdict().items()})
         if progress is not None:
-            progress("test", i + 1, len(TEST_TRACKS))
+            progress("test", 2 * (i + 1), len(TEST_TRACKS))
 
 
 def _merge_shares(out: Path, topology: str, ranges, seeds: int, fingerprint: str, test_steps) -> None:

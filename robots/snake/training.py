@@ -249,18 +249,33 @@ def test(
     steps: int | None = None,
     *,
     seeds,
+    mirror=False,
     progress=None,
 ) -> TestTrace:
-    """Frozen networks (``networks``: a batched `robots.snake.rstdp.NetworkState`) on one pass of ``track``."""
+    """Frozen networks (``networks``: a batched `robots.snake.rstdp.NetworkState`) on one pass of ``track``.
+
+    ``mirror``: per member (or for all), whether it runs the track's mirror
+    image, so that a track and its mirror run as one batch.
+    """
     import dataclasses
 
     config = dataclasses.replace(config, learn=False)
     env_kwargs = {"frame_rows": config.roi[:2]}
-    return run_test(controller(config), params, networks, track, steps, seeds=seeds, env_kwargs=env_kwargs)
+    return run_test(
+        controller(config), params, networks, track, steps, seeds=seeds, env_kwargs=env_kwargs, mirror=mirror
+    )
 
 
 def run_test(
-    ctrl, params, cstates, track: str | tracks.Track, steps: int | None = None, *, seeds, env_kwargs=None
+    ctrl,
+    params,
+    cstates,
+    track: str | tracks.Track,
+    steps: int | None = None,
+    *,
+    seeds,
+    env_kwargs=None,
+    mirror=False,
 ) -> TestTrace:
     """Any controller on one pass of ``track``, a failure restarting it: every control step recorded, per member.
 
@@ -269,13 +284,17 @@ def run_test(
     controller with nothing random ignores the seed's key). A lone member runs
     as a batch of two copies (see the module docstring). ``env_kwargs`` go to
     `env_for` (e.g. ``head_swing=(0.0, 0.0)`` for the uncorrected head).
+    ``mirror``: per member (or for all), whether it runs the mirror image of
+    ``track`` (the same trial as the track named ``TRACK-mirror``).
     """
     env = env_for(track, **(env_kwargs or {}))
     steps = pass_steps(env) if steps is None else steps
+    mirror = np.broadcast_to(np.asarray(mirror, bool), np.shape(np.asarray(seeds).reshape(-1)))
     seeds, n = _padded(seeds)
     if n == 1:
         cstates = jax.tree.map(lambda x: jnp.concatenate([x, x]), cstates)
-    initial, loop = _members(env, None, None, seeds, False)
+        mirror = np.concatenate([mirror, mirror])
+    initial, loop = _members(env, None, None, seeds, mirror)
     loop = loop._replace(controller=cstates)
 
     def reset(state, failed, completed, *, key):
