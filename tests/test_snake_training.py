@@ -158,6 +158,18 @@ def test_reproduce_refuses_weights_of_another_training(tmp_path):
         reproduce_rstdp.run(tmp_path, seeds=2, train_laps=0.01, topologies=("basic",), progress=False)
 
 
+def test_reproduce_refuses_a_share_of_another_training(tmp_path):
+    from robots.snake import reproduce_rstdp
+    from spikejax.errors import UserError
+
+    part = tmp_path / "parts" / "basic" / "seeds-0-2"
+    part.mkdir(parents=True)
+    w = np.zeros((2, 10, 2), np.float32)
+    np.savez(part / "weights.npz", topology="basic", seeds=np.arange(2), w_first=w, w_hidden=w, training="other")
+    with pytest.raises(UserError, match="a share of another training"):
+        reproduce_rstdp.run(tmp_path, seeds=2, train_laps=0.01, topologies=("basic",), progress=False)
+
+
 def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
     weights = tmp_path / "run" / "weights"
     weights.mkdir(parents=True)

@@ -237,6 +237,8 @@ def run_share(
         _, _, w1, w2 = load_weights(merged)
         w1, w2 = w1[start:stop], w2[start:stop]
     else:
+        if (part / "weights.npz").exists() and _trained_with(part / "weights.npz") != fingerprint:
+            raise UserError(f"{part} holds a share of another training (seeds or --train-laps); give another --out")
         if not (part / "weights.npz").exists():
             result = training.train(
                 config,
