@@ -245,7 +245,6 @@ def run_share(
                 params,
                 seeds,
                 steps,
-                env=training.env_for("eight"),
                 chunk_steps=chunk,
                 directory=out / "checkpoints" / _name(topology) / f"seeds-{start}-{stop}",
                 fingerprint=json.dumps([fingerprint, start, stop]),
