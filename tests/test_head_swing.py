@@ -48,6 +48,20 @@ def test_head_swing_cancels_the_residual_swing():
     assert after < 1.0
 
 
+def test_head_swing_joints_cancels_the_swing_of_the_compensation_from_the_joints():
+    """Compensated from the measured joints the head swings 16 degrees; `HEAD_SWING_JOINTS` leaves under 1."""
+    env = SnakeEnv("ladder", drawn=True, camera=False, compensate_from="joints")
+    z = head_swing.swing([(0.0, 0.0), head_swing.HEAD_SWING_JOINTS], env=env)
+    before, after = np.degrees(np.abs(z))
+    assert 14.0 < before < 18.0
+    assert after < 1.0
+
+
+def test_bad_compensate_from_is_one_line_error():
+    with pytest.raises(UserError, match="compensate_from"):
+        SnakeEnv("ladder", camera=False, compensate_from="servos")
+
+
 def test_bad_head_swing_is_one_line_error():
     with pytest.raises(UserError, match="head_swing"):
         SnakeEnv("ladder", camera=False, head_swing=(0.1,))

@@ -46,10 +46,11 @@ def test_the_rescaled_gain_takes_the_first_turn_that_the_default_gain_loses():
     At gain 1 the snake turns only once the body's angle to the target nears
     37 degrees (this gait does not turn for ``|C_o|`` below
     `robots.snake.env.TURN_THRESHOLD`), and the body-angle rule fires first;
-    at the rescaled gain 2 it follows. Without the head-swing correction of
-    `training.env_for` (with it, measured, gain 1 gets round this turn too).
+    at the rescaled gain 2 it follows. With the head compensated from the
+    joint targets and without the head-swing correction, not `training.env_for`'s
+    defaults (with the correction, measured, gain 1 gets round this turn too).
     """
-    env = training.env_for("zigzag", camera=False, head_swing=(0.0, 0.0))
+    env = training.env_for("zigzag", camera=False, compensate_from="targets", head_swing=(0.0, 0.0))
     initial = env.reset(jax.random.PRNGKey(0))
 
     def run(gain):

@@ -46,6 +46,24 @@ def test_head_offset_adds_to_the_first_joint_and_targets_are_clipped():
     assert float(jnp.max(jnp.abs(joint_targets(p, 1.0, 3.0)))) == pytest.approx(JOINT_LIMIT)
 
 
+def test_compensation_from_targets_whips_with_the_steering_and_from_joints_does_not():
+    """A jump of C_o moves the target-compensated joint 1 by -(14 + 12 + ... + 2) / 16 = -3.5 times it at once.
+
+    Read from the measured joints, joint 1 is a function of the body as it is:
+    the same joints give the same head target whatever the steering.
+    """
+    p = gait_params()
+    t = 0.9
+    jump = float(joint_targets(p, t, 0.125)[0] - joint_targets(p, t, -0.125)[0])
+    assert jump == pytest.approx(-3.5 * 0.25, abs=1e-5)
+    joints = jnp.asarray(np.random.default_rng(0).uniform(-0.4, 0.4, 16), jnp.float32)
+    left, right = (joint_targets(p, t, s, 0.1, joints=joints) for s in (-0.125, 0.125))
+    assert float(left[0]) == pytest.approx(float(right[0]), abs=1e-7)
+    assert float(left[0]) == pytest.approx(float(head_compensation(joints)) + 0.1, abs=1e-6)
+    # the other joints still follow Eq. (1), steered
+    np.testing.assert_allclose(right[1:], joint_targets(p, t, 0.125)[1:], atol=1e-7)
+
+
 def test_camera_offset_eq6_phase_identity():
     """For theta = a sin(wt + phi), Eq. (5)'s theta_tuned is alpha a sin(wt + phi + phi_pos)."""
     a, w, phi, alpha, phi_pos, A = math.radians(35), 2.0, 0.4, 2.571, 0.908, 1.4

@@ -84,6 +84,7 @@ from spikejax.errors import UserError
 from spikejax.vision import dvs, render
 
 __all__ = [
+    "COMPENSATE_FROM",
     "LOST_BODY_ANGLE",
     "LOST_HEAD_ANGLE",
     "SNAKE_SPEED",
@@ -99,6 +100,7 @@ LOST_HEAD_ANGLE = math.radians(40.0)  # section III-B
 LOST_BODY_ANGLE = math.radians(35.0)  # section III-B
 # |C_o| below which this snake does not turn at all (measured: `tests/test_snake_env.py`); above it, 2-8 deg/s.
 TURN_THRESHOLD = 0.08
+COMPENSATE_FROM = ("targets", "joints")  # what the head compensation reads: `SnakeEnv`'s compensate_from
 
 
 class SnakeEnvParams(NamedTuple):
@@ -172,6 +174,11 @@ class SnakeEnv(Env):
         steer_threshold: ``|C_o|`` at the smallest nonzero steering action,
             rad (`steering_offset`); default 0, the linear map.
         compensate: the gait's head compensation (section II-A).
+        compensate_from: what that compensation reads: ``"targets"``, the
+            body's joint targets (kinematics of the commanded wave), or
+            ``"joints"``, the body's measured joint angles (the head follows
+            the body as it is; no whip when the steering jumps: see
+            `robots.snake.gait.joint_targets`).
         frame_rows: ``(row0, row1)``: render only those rows of the head
             camera's frame, the others left at 0 (no events); for controllers
             that read a band of the image (Eq. (2)'s region of interest).
@@ -201,6 +208,7 @@ class SnakeEnv(Env):
         max_head_offset: float = 0.5,
         steer_threshold: float = 0.0,
         compensate: bool = True,
+        compensate_from: str = "targets",
         gait: GaitParams | None = None,
         pipes: render.Cylinders | None = None,
         head_swing: tuple[float, float] = (0.0, 0.0),
@@ -242,6 +250,9 @@ class SnakeEnv(Env):
             )
         )
         self.compensate = bool(compensate)
+        if compensate_from not in COMPENSATE_FROM:
+            raise UserError(f"compensate_from must be one of {', '.join(COMPENSATE_FROM)}, got {compensate_from!r}")
+        self.compensate_from = compensate_from
         self.gait = gait_params() if gait is None else gait
         self.pipes = pipes
         if body_window is None:
@@ -324,7 +335,8 @@ class SnakeEnv(Env):
         # A state at time 0 starts an episode, also when Brax's AutoResetWrapper put back only the physics.
         fresh = phys.time == 0.0
         swing = swing_correction(self.gait, phys.time, params.head_swing_amplitude, params.head_swing_phase)
-        ctrl = joint_targets(self.gait, phys.time, steer, head_offset + swing, self.compensate)
+        joints = phys.qpos[self._joints] if self.compensate_from == "joints" else None
+        ctrl = joint_targets(self.gait, phys.time, steer, head_offset + swing, self.compensate, joints)
         phys = self.physics.step(phys, ctrl)
 
         info = dict(state.info)

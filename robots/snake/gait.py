@@ -188,7 +188,7 @@ def swing_correction(params: GaitParams, t, amplitude, phase) -> jax.Array:
     return ramp * amplitude * jnp.sin(params.omega_o * t + phase)
 
 
-def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=True) -> jax.Array:
+def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=True, joints=None) -> jax.Array:
     """Position-servo targets of the 16 joints at ``t``: Eq. (1) of the snake R-STDP paper, steered, head-compensated.
 
     Args:
@@ -204,6 +204,14 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
         compensate: replace the first joint's Eq. (1) target by
             `head_compensation` of the others (the snake R-STDP paper's head compensation);
             ``False`` gives Eq. (1) unchanged (plus ``head_offset``).
+        joints: the joints' measured angles ``(16,)``, rad: when given, the
+            compensation points the head along the body as it is rather than
+            as the targets place it. The servos lag their targets, so a change
+            of ``steer`` (which shifts all seven odd joints from joint 3 at
+            once) moves the compensated target of joint 1 by ``-3.5`` times
+            that change in one step, while the body follows over a second:
+            the head whips, and a network steering bang-bang swings its own
+            camera by 20-40 degrees (`robots.snake.training.env_for`).
 
     Returns:
         Targets ``(16,)`` in rad, joint 1 first, clipped to the joints' range
@@ -217,6 +225,7 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
     """
     t = jnp.asarray(t, jnp.float32)
     alpha = _eq1(params, t, jnp.asarray(steer, jnp.float32))
-    head = jnp.where(compensate, head_compensation(alpha), alpha[0])
+    body = alpha if joints is None else jnp.asarray(joints, jnp.float32)
+    head = jnp.where(compensate, head_compensation(body), alpha[0])
     alpha = alpha.at[0].set(head + head_offset)
     return jnp.clip(alpha, -JOINT_LIMIT, JOINT_LIMIT)

@@ -8,7 +8,8 @@ or over one process a core. `MujocoTrackEnv` is that env for
 `robots.snake.ppo.TrackTask` with the ``"angles"`` observation: the same MJCF
 and settings (`robots.snake.physics.load_mj_model`, 5 steps of 4 ms a control
 step), the gait of Eq. (1) of the snake R-STDP paper with its head
-compensation (`robots.snake.gait.joint_targets`, with the env's phase-locked
+compensation (`robots.snake.gait.joint_targets`, read from the measured
+joints when the env's is, with the env's phase-locked
 `robots.snake.gait.swing_correction`), the target moved along the
 drawn 8 as `robots.snake.tracks.advance` moves it, the angles of Eq. (12),
 the reset rule of Sec. III-B, the reward ``1 - |a_head| / 40 deg`` and the
@@ -56,13 +57,13 @@ def swing_correction(p: gait.GaitParams, t: float, amplitude: float, phase: floa
     return ramp * amplitude * np.sin(p.omega_o * t + phase)
 
 
-def joint_targets(p: gait.GaitParams, t: float, steer: float, head_offset: float) -> np.ndarray:
-    """`robots.snake.gait.joint_targets` (compensated) in NumPy."""
+def joint_targets(p: gait.GaitParams, t: float, steer: float, head_offset: float, joints=None) -> np.ndarray:
+    """`robots.snake.gait.joint_targets` (compensated, from the measured ``joints`` when given) in NumPy."""
     P = p.P_head + (p.P_tail - p.P_head) * (_I - 1) / (gait.N_JOINTS - 1)
     odd = P * p.A_o * np.sin(_I * p.Omega_o + t * p.omega_o + p.delta_o) + steer
     even = P * p.A_e * np.sin(_I * p.Omega_e + t * p.omega_e) + p.C_e
     alpha = np.where(_ODD, odd, even)
-    alpha[0] = -np.dot(_COMPENSATION, alpha) + head_offset
+    alpha[0] = -np.dot(_COMPENSATION, alpha if joints is None else joints) + head_offset
     return np.clip(alpha, -gait.JOINT_LIMIT, gait.JOINT_LIMIT)
 
 
@@ -95,6 +96,7 @@ def _constants() -> dict:
         "steer_threshold": float(env.params.steer_threshold),
         "max_head": float(env.params.max_head_offset),
         "head_swing": (float(env.params.head_swing_amplitude), float(env.params.head_swing_phase)),
+        "from_joints": env.compensate_from == "joints",
         "speed": float(env.params.target_speed),
         "window": int(env.window),
         "origin": np.asarray(env.origin, np.float64),
@@ -124,6 +126,7 @@ class MujocoTrackEnv(gymnasium.Env):
         self.dt, self.substeps, self.gait, self.window = c["dt"], c["substeps"], c["gait"], c["window"]
         self.max_steer, self.max_head, self.speed = c["max_steer"], c["max_head"], c["speed"]
         self.steer_threshold, self.head_swing = c["steer_threshold"], c["head_swing"]
+        self.from_joints = c["from_joints"]
         self.origin, self.tracks = c["origin"], c["tracks"]
         self.model = load_mj_model("tuned")
         self.data = mujoco.MjData(self.model)
@@ -156,7 +159,8 @@ class MujocoTrackEnv(gymnasium.Env):
             d.time = np.float32(d.time)
             d.qacc_warmstart[:] = 0.0
         swing = swing_correction(self.gait, self.data.time, *self.head_swing)
-        ctrl = joint_targets(self.gait, self.data.time, steer, head_offset + swing)
+        joints = self.data.qpos[self.joints] if self.from_joints else None
+        ctrl = joint_targets(self.gait, self.data.time, steer, head_offset + swing, joints)
         self.data.ctrl[:] = ctrl.astype(np.float32) if self.as_jax else ctrl
         mujoco.mj_step(self.model, self.data, nstep=self.substeps)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves the poses of the last substep's start

@@ -33,10 +33,13 @@ import numpy as np
 from robots.snake.env import SnakeEnv, rollout
 from robots.snake.gait import gait_period
 
-__all__ = ["HEAD_SWING", "fundamental", "swing", "fit"]
+__all__ = ["HEAD_SWING", "HEAD_SWING_JOINTS", "fundamental", "swing", "fit"]
 
 # (amplitude, phase), rad: `fit()` for the default gait on the C backend (2 steps from a 10-degree probe).
 HEAD_SWING = (math.radians(14.27), math.radians(259.7))
+# The same for the compensation read from the measured joints (``SnakeEnv(compensate_from="joints")``):
+# fit(env=SnakeEnv("ladder", drawn=True, camera=False, compensate_from="joints")).
+HEAD_SWING_JOINTS = (math.radians(14.943), math.radians(51.13))
 
 SKIP_PERIODS = 2  # the start-up transient left out of every measurement
 PERIODS = 12  # measured after it: the ladder's lead-in and first run stay straight for 14 periods

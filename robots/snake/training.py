@@ -35,7 +35,7 @@ import numpy as np
 
 from robots.snake import tracks
 from robots.snake.env import SNAKE_SPEED, SnakeEnv
-from robots.snake.head_swing import HEAD_SWING
+from robots.snake.head_swing import HEAD_SWING_JOINTS
 from robots.snake.rstdp import NetworkConfig, NetworkParams, controller, network_init
 from spikejax import rollout
 from spikejax.errors import UserError
@@ -68,13 +68,18 @@ def env_for(track="eight", **kwargs) -> SnakeEnv:
     wound Eq. (5)'s integrator into oscillations, and 0.25 rad nearly stops
     the slithering). Only `FRAME_ROWS` of the camera's frame are rendered
     (`check_frame_rows` refuses a network whose ROI reaches beyond them).
-    The head's residual swing is cancelled
-    (`robots.snake.head_swing.HEAD_SWING`): the basic network has no head
-    controller, and without it the target sweeps 30 degrees across its view
-    every gait period.
+    The head compensation reads the body's measured joints
+    (``compensate_from="joints"``): a network steers bang-bang, and the
+    compensation from the joint targets whips the head by 20-40 degrees at
+    each flip of ``D_body`` (`robots.snake.gait.joint_targets`), which is what
+    tripped the 40-degree failure rule in the ladder's turns. The head's
+    residual swing is cancelled (`robots.snake.head_swing.HEAD_SWING_JOINTS`):
+    the basic network has no head controller, and without it the target
+    sweeps 30 degrees across its view every gait period.
     """
     kwargs.setdefault("frame_rows", FRAME_ROWS)
-    kwargs.setdefault("head_swing", HEAD_SWING)
+    kwargs.setdefault("compensate_from", "joints")
+    kwargs.setdefault("head_swing", HEAD_SWING_JOINTS)
     kwargs.setdefault("drawn", True)
     kwargs.setdefault("max_steer", MAX_STEER)
     kwargs.setdefault("compact_events", False)
