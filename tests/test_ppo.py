@@ -98,12 +98,12 @@ def test_a_short_ppo_training_tracks_better_than_the_untrained_policy():
     ``|a_head|`` 9.4 deg untrained (its mean action is near 0, so it walks
     straight and keeps the target through the lead-in only by luck of the
     track), 3.1 deg trained; neither failed. Trained and tested with the
-    head's swing uncorrected: with it cancelled (`training.env_for`'s
-    default) walking straight down the lead-in keeps the head within 2.4 deg,
-    and 30 s tell nothing.
+    head compensated from the joint targets and its swing uncorrected: with
+    the swing cancelled walking straight down the lead-in keeps the head
+    within 2.4 deg, and 30 s tell nothing.
     """
     settings = ppo.PPOSettings(num_envs=32, batch_size=32)
-    plain = {"head_swing": (0.0, 0.0)}
+    plain = {"head_swing": (0.0, 0.0), "compensate_from": "targets"}
     task = ppo.make_task("snake-track", "angles", **plain)
     saved = {}
     ppo.train(task, 100_000, settings=settings, evals=1, on_params=lambda n, p: saved.__setitem__(n, p))
