@@ -12,6 +12,7 @@ import pytest
 from robots.snake import env as snake_env
 from robots.snake import steering, training
 from robots.snake.reproduce_baselines import HEADER, run, scripted_controller
+from spikejax.errors import UserError
 
 
 def test_the_scripted_controller_in_the_common_test_steers_on_the_angle_it_saw():
@@ -20,13 +21,14 @@ def test_the_scripted_controller_in_the_common_test_steers_on_the_angle_it_saw()
     Against `robots.snake.env.rollout` driving the same controller, the head
     angles agree bit for bit for the first seven steps, then part by float
     rounding (the two programs round an action's last bit differently, and
-    the closed loop amplifies it): the head within 3 cm over 3 s (2.1 cm measured at gain 2).
+    the closed loop amplifies it): the head within 3 cm over 3 s.
     """
     env = training.env_for("zigzag")
     states = jax.tree.map(lambda x: jnp.stack([x]), steering.init())
-    trace = training.run_test(scripted_controller(env.dt), None, states, "zigzag", 150, seeds=np.arange(1))
-    gains = steering.for_max_steer(training.MAX_STEER)
-    assert float(gains.gain) == pytest.approx(2.0)  # the default 1 at 0.25 rad, rescaled to 0.125 rad
+    trace = training.run_test(scripted_controller(env), None, states, "zigzag", 150, seeds=np.arange(1))
+    gains = steering.for_max_steer(training.MAX_STEER, "joints")
+    assert float(gains.gain) == pytest.approx(4.0)  # 2 at 0.25 rad, rescaled to 0.125 rad
+    assert float(steering.for_max_steer(training.MAX_STEER).gain) == pytest.approx(2.0)  # from the targets: 1 at 0.25
     seen = trace.a_body[0, :-1]
     np.testing.assert_allclose(trace.d_body[0, 1:], np.clip(gains.gain * seen, -1, 1), atol=1e-6)
     np.testing.assert_allclose(trace.d_head[0, 1:], np.clip(gains.head_gain * seen, -1, 1), atol=1e-6)
@@ -70,6 +72,44 @@ def test_the_rescaled_gain_takes_the_first_turn_that_the_default_gain_loses():
     first = np.argmax(failed[0])
     assert failed[0].any() and 3000 < first < 4000, first  # lost in the turn, not on the straight lead-in
     assert not failed[1].any()
+
+
+def test_a_head_gain_of_2_oscillates_with_the_compensation_from_the_joints_and_the_tuned_gain_does_not():
+    """60 s of the ladder's straight lead-in in `training.env_for`'s env (head compensated from the measured joints).
+
+    Turning the head bends the neck joints the compensation reads, a loop
+    back through the body: the gains tuned for the compensation from the
+    targets (head gain 2) swing the head by about 19 degrees and lose the
+    target; `steering.for_max_steer`'s gains for the joints (head 1.25) hold
+    it within a few degrees.
+    """
+    env = training.env_for("ladder", camera=False)
+    initial = env.reset(jax.random.PRNGKey(0))
+
+    def run(gain, head_gain):
+        params = steering.SteeringParams(gain=gain, head_gain=head_gain)
+
+        def body(carry, _):
+            state, cstate = carry
+            cstate, action = steering.step(params, cstate, state.obs, env.dt)
+            state = env.step(state, action)
+            return (state, cstate), (state.metrics["a_head"], state.done > 0)
+
+        return jax.lax.scan(body, (initial, steering.init()), None, length=3000)[1]
+
+    tuned = steering.for_max_steer(training.MAX_STEER, "joints")
+    old = steering.for_max_steer(training.MAX_STEER, "targets")
+    a_head, failed = jax.jit(jax.vmap(run))(
+        jnp.array([old.gain, tuned.gain]), jnp.array([old.head_gain, tuned.head_gain])
+    )
+    swing = np.degrees(np.abs(np.asarray(a_head))).mean(axis=1)
+    assert swing[0] > 10.0 and np.asarray(failed)[0].any()
+    assert swing[1] < 5.0 and not np.asarray(failed)[1].any()
+
+
+def test_bad_compensate_from_for_the_gains_is_one_line_error():
+    with pytest.raises(UserError, match="compensate_from"):
+        steering.for_max_steer(0.125, "servos")
 
 
 @pytest.mark.slow  # ~3 min

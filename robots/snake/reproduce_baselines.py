@@ -41,9 +41,10 @@ __all__ = ["command", "run", "HEADER"]
 HEADER = [*reproduce_rstdp.HEADER, "env_steps_to_learn"]
 
 
-def scripted_controller(dt: float) -> Controller:
-    """`robots.snake.steering`, its gains for the training env's range (`steering.for_max_steer`), as a Controller."""
-    params = steering.for_max_steer(training.MAX_STEER)
+def scripted_controller(env) -> Controller:
+    """`robots.snake.steering` as a Controller, its gains for ``env``'s steering range and head compensation."""
+    params = steering.for_max_steer(float(env.params.max_steer), env.compensate_from)
+    dt = env.dt
 
     def step(_, cstate, env_state, *, key):
         cstate, action = steering.step(params, cstate, env_state.obs, dt)
@@ -57,7 +58,7 @@ def _scripted_rows(test_steps) -> list[list]:
     for name in reproduce_rstdp.TEST_TRACKS:
         env = training.env_for(name)
         states = jax.tree.map(lambda x: jnp.stack([x]), steering.init())
-        trace = training.run_test(scripted_controller(env.dt), None, states, name, test_steps, seeds=np.arange(1))
+        trace = training.run_test(scripted_controller(env), None, states, name, test_steps, seeds=np.arange(1))
         for row in reproduce_rstdp.test_rows("scripted", name, trace, env.dt, reproduce_rstdp._windows(env)):
             rows.append(row[:-1] + ["non-spiking baseline (no paper figure)", 0])
     return rows

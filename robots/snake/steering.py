@@ -23,6 +23,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from robots.snake.env import COMPENSATE_FROM
+from spikejax.errors import UserError
+
 __all__ = ["SteeringParams", "SteeringState", "for_max_steer", "init", "step"]
 
 
@@ -50,23 +53,43 @@ class SteeringParams(NamedTuple):
     tau: float | jax.Array = 0.0
 
 
-def for_max_steer(max_steer: float) -> SteeringParams:
+def for_max_steer(max_steer: float, compensate_from: str = "targets") -> SteeringParams:
     """The default gains rescaled to a steering range of ``max_steer`` rad (the same ``C_o`` per radian).
 
-    At `robots.snake.training.MAX_STEER` (0.125 rad) this doubles the body
-    gain to 2. Kept at 1 there, the controller lost the target 0.8-0.9 times
-    a minute, at every first turn of the test tracks: this snake does not
-    turn at all for ``|C_o|`` below `robots.snake.env.TURN_THRESHOLD`
-    (0.08 rad, 64 % of that range), so it only turned once the body's angle
-    to the target passed about 37 degrees, and the body-angle rule (35
-    degrees) fired first. Measured over full test passes of the ladder, the
-    zigzag and their mirrors in `robots.snake.training.env_for`'s env, a grid
-    of body gains 1-3 and head gains 1-3: body 2 / head 2 was one of the few
-    cells that never lost the target on any of the four, and had the lowest
-    running-mean head angle (0.10-0.14 degrees in the paper's 625-step
-    window, 3.0-3.1 degrees instantaneous); body 1 and 1.5 failed on all four.
+    With the head compensated from the joint targets (the snake env's
+    default), at `robots.snake.training.MAX_STEER` (0.125 rad) this doubles
+    the body gain to 2. Kept at 1 there, the controller lost the target
+    0.8-0.9 times a minute, at every first turn of the test tracks: this
+    snake does not turn at all for ``|C_o|`` below
+    `robots.snake.env.TURN_THRESHOLD` (0.08 rad, 64 % of that range), so it
+    only turned once the body's angle to the target passed about 37 degrees,
+    and the body-angle rule (35 degrees) fired first. Measured over full
+    test passes of the ladder, the zigzag and their mirrors in
+    `robots.snake.training.env_for`'s env (then compensated from the
+    targets), a grid of body gains 1-3 and head gains 1-3: body 2 / head 2
+    was one of the few cells that never lost the target on any of the four,
+    and had the lowest running-mean head angle (0.10-0.14 degrees in the
+    paper's 625-step window, 3.0-3.1 degrees instantaneous); body 1 and 1.5
+    failed on all four.
+
+    ``compensate_from``: what the env's head compensation reads
+    (`robots.snake.env.SnakeEnv`'s ``compensate_from``). From the measured
+    joints the head loop has a path back through the body: turning the head
+    bends the neck joints, which the compensation reads. There head gain 2
+    oscillates (the head 19 degrees off the target on average, three
+    failures a minute) and 1.5 does with body gains from 2.5 (8-11 degrees).
+    The gains for it are body 2 at 0.25 rad (4 at 0.125) and head 1.25,
+    measured in `robots.snake.training.env_for`'s env (now compensated from
+    the joints), full passes as above, over body gains 1.5-8 and head gains
+    1-1.5: no cell lost the target, and of those with a head gain of 1.25
+    or less (a margin to the oscillation) this one had about the lowest
+    running-mean head angle, 0.70-1.08 degrees in the paper's window,
+    2.5-2.7 instantaneous (body 5: 0.72-1.05; 5 / 1.4: 0.51-0.80; 2 / 1:
+    2.0-3.6).
     """
-    defaults = SteeringParams()
+    if compensate_from not in COMPENSATE_FROM:
+        raise UserError(f"compensate_from must be one of {', '.join(COMPENSATE_FROM)}, got {compensate_from!r}")
+    defaults = SteeringParams() if compensate_from == "targets" else SteeringParams(gain=2.0, head_gain=1.25)
     return defaults._replace(gain=defaults.gain * 0.25 / max_steer)
 
 
