@@ -178,7 +178,9 @@ class SnakeEnv(Env):
             body's joint targets (kinematics of the commanded wave), or
             ``"joints"``, the body's measured joint angles (the head follows
             the body as it is; no whip when the steering jumps: see
-            `robots.snake.gait.joint_targets`).
+            `robots.snake.gait.joint_targets`; a head controller's loop then
+            runs back through the neck joints: see
+            `robots.snake.steering.for_max_steer`).
         frame_rows: ``(row0, row1)``: render only those rows of the head
             camera's frame, the others left at 0 (no events); for controllers
             that read a band of the image (Eq. (2)'s region of interest).
