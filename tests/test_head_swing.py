@@ -2,6 +2,7 @@
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -71,3 +72,33 @@ def test_default_env_has_no_correction():
     env = SnakeEnv("ladder", camera=False)
     assert float(env.params.head_swing_amplitude) == 0.0
     assert jnp.asarray(env.params.head_swing_phase).dtype == jnp.float32
+
+
+def test_lagged_compensation_low_passes_the_steering_and_without_steering_is_the_targets():
+    """``compensate_from="lagged"``: ``C_o`` low-passed, ``s (1 - exp(-n dt / tau))`` after n steps of a step ``s``.
+
+    With no steering the lagged compensation is the targets' exactly (the
+    same joint targets, so the same physics, bit for bit).
+    """
+    lagged = SnakeEnv("ladder", drawn=True, camera=False, compensate_from="lagged", lag_tau=0.4)
+    plain = SnakeEnv("ladder", drawn=True, camera=False)
+
+    def run(env, steer):
+        def body(state, _):
+            state = env.step(state, jnp.array([steer, 0.0]))
+            return state, state.pipeline_state.head_pos
+
+        return jax.lax.scan(body, env.reset(jax.random.PRNGKey(0)), None, length=30)
+
+    state, heads = jax.jit(lambda: run(lagged, 1.0))()
+    expected = float(lagged.params.max_steer) * (1.0 - np.exp(-30 * lagged.dt / 0.4))
+    assert float(state.info["steer_lag"]) == pytest.approx(expected, rel=1e-5)
+    _, straight = jax.jit(lambda: run(lagged, 0.0))()
+    _, reference = jax.jit(lambda: run(plain, 0.0))()
+    np.testing.assert_array_equal(straight, reference)
+    assert np.abs(np.asarray(heads) - np.asarray(reference)).max() > 1e-4  # the steering does reach the body
+
+
+def test_bad_lag_tau_is_one_line_error():
+    with pytest.raises(UserError, match="lag_tau"):
+        SnakeEnv("ladder", camera=False, compensate_from="lagged", lag_tau=0.0)

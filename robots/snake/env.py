@@ -100,7 +100,7 @@ LOST_HEAD_ANGLE = math.radians(40.0)  # section III-B
 LOST_BODY_ANGLE = math.radians(35.0)  # section III-B
 # |C_o| below which this snake does not turn at all (measured: `tests/test_snake_env.py`); above it, 2-8 deg/s.
 TURN_THRESHOLD = 0.08
-COMPENSATE_FROM = ("targets", "joints")  # what the head compensation reads: `SnakeEnv`'s compensate_from
+COMPENSATE_FROM = ("targets", "joints", "lagged")  # what the head compensation reads: `SnakeEnv`'s compensate_from
 
 
 class SnakeEnvParams(NamedTuple):
@@ -180,7 +180,11 @@ class SnakeEnv(Env):
             the body as it is; no whip when the steering jumps: see
             `robots.snake.gait.joint_targets`; a head controller's loop then
             runs back through the neck joints: see
-            `robots.snake.steering.for_max_steer`).
+            `robots.snake.steering.for_max_steer`), or ``"lagged"``, the
+            targets with the steering ``C_o`` low-passed over ``lag_tau``
+            (the body's lag behind a step of ``C_o``, modelled: no whip, and
+            no loop through the neck).
+        lag_tau: the time constant of ``"lagged"``, s.
         frame_rows: ``(row0, row1)``: render only those rows of the head
             camera's frame, the others left at 0 (no events); for controllers
             that read a band of the image (Eq. (2)'s region of interest).
@@ -211,6 +215,7 @@ class SnakeEnv(Env):
         steer_threshold: float = 0.0,
         compensate: bool = True,
         compensate_from: str = "targets",
+        lag_tau: float = 0.5,
         gait: GaitParams | None = None,
         pipes: render.Cylinders | None = None,
         head_swing: tuple[float, float] = (0.0, 0.0),
@@ -255,6 +260,9 @@ class SnakeEnv(Env):
         if compensate_from not in COMPENSATE_FROM:
             raise UserError(f"compensate_from must be one of {', '.join(COMPENSATE_FROM)}, got {compensate_from!r}")
         self.compensate_from = compensate_from
+        if not lag_tau > 0:
+            raise UserError(f"lag_tau must be positive, got {lag_tau!r}")
+        self.lag_tau = float(lag_tau)
         self.gait = gait_params() if gait is None else gait
         self.pipes = pipes
         if body_window is None:
@@ -318,6 +326,8 @@ class SnakeEnv(Env):
             "control_steps": jnp.zeros((), jnp.int32),
             "completed": jnp.zeros((), bool),
         }
+        if self.compensate_from == "lagged":
+            info["steer_lag"] = zero  # C_o low-passed over lag_tau
         return State(
             pipeline_state=phys,
             obs=self._obs(phys, a_head, a_body),
@@ -339,6 +349,13 @@ class SnakeEnv(Env):
         swing = swing_correction(self.gait, phys.time, params.head_swing_amplitude, params.head_swing_phase)
         joints = phys.qpos[self._joints] if self.compensate_from == "joints" else None
         ctrl = joint_targets(self.gait, phys.time, steer, head_offset + swing, self.compensate, joints)
+        lagged = {}
+        if self.compensate_from == "lagged":
+            lag = jnp.where(fresh, 0.0, state.info["steer_lag"])
+            lag = lag + (1.0 - math.exp(-self.dt / self.lag_tau)) * (steer - lag)
+            head = joint_targets(self.gait, phys.time, lag, head_offset + swing, self.compensate)[0]
+            ctrl = ctrl.at[0].set(head)
+            lagged = {"steer_lag": lag}
         phys = self.physics.step(phys, ctrl)
 
         info = dict(state.info)
@@ -370,6 +387,7 @@ class SnakeEnv(Env):
             body_angles=body_angles,
             control_steps=info["control_steps"] + 1,
             completed=target_s >= track.length,
+            **lagged,
         )
         lost = (jnp.abs(a_head) > LOST_HEAD_ANGLE) | (jnp.abs(jnp.mean(body_angles)) > LOST_BODY_ANGLE)
         return state.replace(

@@ -86,6 +86,8 @@ def _wrap(angle: float) -> float:
 def _constants() -> dict:
     """The task's constants, read once a process from the JAX env of `robots.snake.training.env_for`."""
     env = training.env_for("eight", camera=False)
+    if env.compensate_from == "lagged":
+        raise UserError("the Gymnasium twin has no lagged head compensation; build the JAX task's env without it")
     track = env.track
     return {
         "lap_steps": training.lap_steps(env),

@@ -89,7 +89,7 @@ def for_max_steer(max_steer: float, compensate_from: str = "targets") -> Steerin
     """
     if compensate_from not in COMPENSATE_FROM:
         raise UserError(f"compensate_from must be one of {', '.join(COMPENSATE_FROM)}, got {compensate_from!r}")
-    defaults = SteeringParams() if compensate_from == "targets" else SteeringParams(gain=2.0, head_gain=1.25)
+    defaults = SteeringParams(gain=2.0, head_gain=1.25) if compensate_from == "joints" else SteeringParams()
     return defaults._replace(gain=defaults.gain * 0.25 / max_steer)
 
 
