@@ -26,8 +26,8 @@ def test_the_scripted_controller_in_the_common_test_steers_on_the_angle_it_saw()
     env = training.env_for("zigzag")
     states = jax.tree.map(lambda x: jnp.stack([x]), steering.init())
     trace = training.run_test(scripted_controller(env), None, states, "zigzag", 150, seeds=np.arange(1))
-    gains = steering.for_max_steer(training.MAX_STEER, "joints")
-    assert float(gains.gain) == pytest.approx(4.0)  # 2 at 0.25 rad, rescaled to 0.125 rad
+    gains = steering.for_max_steer(training.MAX_STEER, env.compensate_from)
+    assert float(steering.for_max_steer(training.MAX_STEER, "joints").gain) == pytest.approx(4.0)  # 2 at 0.25 rad
     assert float(steering.for_max_steer(training.MAX_STEER).gain) == pytest.approx(2.0)  # from the targets: 1 at 0.25
     seen = trace.a_body[0, :-1]
     np.testing.assert_allclose(trace.d_body[0, 1:], np.clip(gains.gain * seen, -1, 1), atol=1e-6)
@@ -75,7 +75,7 @@ def test_the_rescaled_gain_takes_the_first_turn_that_the_default_gain_loses():
 
 
 def test_a_head_gain_of_2_oscillates_with_the_compensation_from_the_joints_and_the_tuned_gain_does_not():
-    """60 s of the ladder's straight lead-in in `training.env_for`'s env (head compensated from the measured joints).
+    """60 s of the ladder's straight lead-in, the head compensated from the measured joints.
 
     Turning the head bends the neck joints the compensation reads, a loop
     back through the body: the gains tuned for the compensation from the
@@ -83,7 +83,7 @@ def test_a_head_gain_of_2_oscillates_with_the_compensation_from_the_joints_and_t
     target; `steering.for_max_steer`'s gains for the joints (head 1.25) hold
     it within a few degrees.
     """
-    env = training.env_for("ladder", camera=False)
+    env = training.env_for("ladder", camera=False, compensate_from="joints")
     initial = env.reset(jax.random.PRNGKey(0))
 
     def run(gain, head_gain):

@@ -140,7 +140,13 @@ def _spikejax(*args):
 
 
 @pytest.mark.parametrize(
-    "flag, value, words", [("--topologies", "deep", "unknown deep"), ("--train-laps", "0", "positive")]
+    "flag, value, words",
+    [
+        ("--topologies", "deep", "unknown deep"),
+        ("--train-laps", "0", "positive"),
+        ("--head-compensation", "servos", "must be one of targets, joints, lagged"),
+        ("--lag-tau", "0", "--lag-tau must be positive"),
+    ],
 )
 def test_reproduce_refuses_bad_flags_in_one_line(tmp_path, flag, value, words):
     r = _spikejax("reproduce", "snake-rstdp", "--out", str(tmp_path / "o"), flag, value)
@@ -168,6 +174,30 @@ def test_reproduce_refuses_a_share_of_another_training(tmp_path):
     np.savez(part / "weights.npz", topology="basic", seeds=np.arange(2), w_first=w, w_hidden=w, training="other")
     with pytest.raises(UserError, match="a share of another training"):
         reproduce_rstdp.run(tmp_path, seeds=2, train_laps=0.01, topologies=("basic",), progress=False)
+
+
+def test_evaluate_tests_weights_in_the_env_they_were_trained_in(tmp_path, monkeypatch):
+    from robots.snake import reproduce_rstdp
+
+    from types import SimpleNamespace
+
+    loop = SimpleNamespace(controller=SimpleNamespace(w_first=np.zeros((2, 10, 2)), w_hidden=np.zeros((2, 8, 2))))
+    seen = []
+
+    def test(*args, env_kwargs=None, **kwargs):
+        seen.append(env_kwargs)
+        raise KeyboardInterrupt
+
+    (tmp_path / "run" / "weights").mkdir(parents=True)
+    env = reproduce_rstdp.env_settings("targets", 1.0)
+    reproduce_rstdp.save_weights(tmp_path / "run" / "weights" / "basic.npz", "basic", np.arange(2), loop, "", env)
+    monkeypatch.setattr(training, "test", test)
+    with pytest.raises(KeyboardInterrupt):
+        reproduce_rstdp.run_evaluate(
+            out=tmp_path / "ev", weights=tmp_path / "run", track="zigzag", steps=10, no_progress=True
+        )
+    assert seen == [{"compensate_from": "targets"}]
+    assert reproduce_rstdp.env_settings("lagged", 2.0) == {"compensate_from": "lagged", "lag_tau": 2.0}
 
 
 def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
@@ -222,6 +252,11 @@ def test_reproduce_and_evaluate_small(tmp_path):
     assert all(row["seeds"] == "2" and float(row["ci_low"]) <= float(row["mean_head_angle_deg"]) for row in rows)
     with np.load(out / "weights" / "basic.npz") as z:
         assert z["w_first"].shape == (2, 10, 2)
+    from robots.snake.reproduce_rstdp import trained_env
+
+    assert trained_env(out / "weights" / "basic.npz") == {"compensate_from": "lagged", "lag_tau": training.LAG_TAU}
+    r = _spikejax("reproduce", "snake-rstdp", *args, "--no-progress", "--head-compensation", "joints")
+    assert r.returncode == 2 and "trained with other settings" in r.stderr
     for png in ("training", "weights", "test", "trajectories"):
         assert (out / f"snake_rstdp_{png}.png").stat().st_size > 10_000
 

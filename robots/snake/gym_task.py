@@ -9,7 +9,8 @@ or over one process a core. `MujocoTrackEnv` is that env for
 and settings (`robots.snake.physics.load_mj_model`, 5 steps of 4 ms a control
 step), the gait of Eq. (1) of the snake R-STDP paper with its head
 compensation (`robots.snake.gait.joint_targets`, read from the measured
-joints when the env's is, with the env's phase-locked
+joints or from the targets with the steering low-passed when the env's
+is, with the env's phase-locked
 `robots.snake.gait.swing_correction`), the target moved along the
 drawn 8 as `robots.snake.tracks.advance` moves it, the angles of Eq. (12),
 the reset rule of Sec. III-B, the reward ``1 - |a_head| / 40 deg`` and the
@@ -86,8 +87,6 @@ def _wrap(angle: float) -> float:
 def _constants() -> dict:
     """The task's constants, read once a process from the JAX env of `robots.snake.training.env_for`."""
     env = training.env_for("eight", camera=False)
-    if env.compensate_from == "lagged":
-        raise UserError("the Gymnasium twin has no lagged head compensation; build the JAX task's env without it")
     track = env.track
     return {
         "lap_steps": training.lap_steps(env),
@@ -98,7 +97,8 @@ def _constants() -> dict:
         "steer_threshold": float(env.params.steer_threshold),
         "max_head": float(env.params.max_head_offset),
         "head_swing": (float(env.params.head_swing_amplitude), float(env.params.head_swing_phase)),
-        "from_joints": env.compensate_from == "joints",
+        "compensate_from": env.compensate_from,
+        "lag": 1.0 - float(np.exp(-env.dt / env.lag_tau)),
         "speed": float(env.params.target_speed),
         "window": int(env.window),
         "origin": np.asarray(env.origin, np.float64),
@@ -128,7 +128,7 @@ class MujocoTrackEnv(gymnasium.Env):
         self.dt, self.substeps, self.gait, self.window = c["dt"], c["substeps"], c["gait"], c["window"]
         self.max_steer, self.max_head, self.speed = c["max_steer"], c["max_head"], c["speed"]
         self.steer_threshold, self.head_swing = c["steer_threshold"], c["head_swing"]
-        self.from_joints = c["from_joints"]
+        self.compensate_from, self.lag = c["compensate_from"], c["lag"]
         self.origin, self.tracks = c["origin"], c["tracks"]
         self.model = load_mj_model("tuned")
         self.data = mujoco.MjData(self.model)
@@ -145,7 +145,7 @@ class MujocoTrackEnv(gymnasium.Env):
         self.mirror = bool(self.np_random.random() < 0.5) if mirror is None else bool(mirror)
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
-        self.target_s, self.steps = 0.0, 0
+        self.target_s, self.steps, self.steer_lag = 0.0, 0, 0.0
         self.body_angles = np.zeros(self.window)
         a_head, a_body = self._angles(0.0)
         return self._obs(a_head, a_body), {}
@@ -161,8 +161,11 @@ class MujocoTrackEnv(gymnasium.Env):
             d.time = np.float32(d.time)
             d.qacc_warmstart[:] = 0.0
         swing = swing_correction(self.gait, self.data.time, *self.head_swing)
-        joints = self.data.qpos[self.joints] if self.from_joints else None
+        joints = self.data.qpos[self.joints] if self.compensate_from == "joints" else None
         ctrl = joint_targets(self.gait, self.data.time, steer, head_offset + swing, joints)
+        if self.compensate_from == "lagged":
+            self.steer_lag += self.lag * (steer - self.steer_lag)
+            ctrl[0] = joint_targets(self.gait, self.data.time, self.steer_lag, head_offset + swing)[0]
         self.data.ctrl[:] = ctrl.astype(np.float32) if self.as_jax else ctrl
         mujoco.mj_step(self.model, self.data, nstep=self.substeps)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves the poses of the last substep's start

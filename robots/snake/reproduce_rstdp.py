@@ -21,7 +21,12 @@ images) and writes, in ``--out``:
   Figs. 6, 8a), ``snake_rstdp_test.png`` (angle and decoded directions on each
   test track: Fig. 10) and ``snake_rstdp_trajectories.png``.
 
-``evaluate`` tests saved weights on any track, a name or a CSV of waypoints.
+The env is `robots.snake.training.env_for`'s; ``--head-compensation`` and
+``--lag-tau`` change what its head compensation reads (`env_settings`),
+for training and test alike, and the weights files keep them.
+
+``evaluate`` tests saved weights on any track, a name or a CSV of waypoints,
+in the env they were trained in.
 
 ``reproduce snake-rstdp-choices`` runs ``sweeps/snake_rstdp_choices.toml``
 (the rate cap of Eq. (2), the steering range, the scale of ``C_reward``) and
@@ -42,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from robots.snake import metrics, rstdp, tracks, training
+from robots.snake.env import COMPENSATE_FROM
 from robots.snake.gait import gait_params, gait_period
 from spikejax.benchmarking import write_csv
 from spikejax.commands import Command, add_common, count, output_directory
@@ -99,8 +105,13 @@ def _windows(env) -> tuple[int, ...]:
     return (period, metrics.PAPER_WINDOW)
 
 
-def save_weights(path: Path, topology: str, seeds, loop, training_settings: str = "") -> None:
-    """The trained weights of every seed, atomically; ``training_settings`` names the training that made them."""
+def save_weights(path: Path, topology: str, seeds, loop, training_settings: str = "", env_kwargs=None) -> None:
+    """The trained weights of every seed, atomically.
+
+    ``training_settings`` names the training that made them; ``env_kwargs``
+    the env's settings beside `robots.snake.training.env_for`'s defaults, read
+    back by `trained_env` so that a test runs them in the env they learned in.
+    """
     tmp = path.with_suffix(".tmp.npz")
     net = jax.device_get(loop.controller)
     np.savez(
@@ -110,6 +121,7 @@ def save_weights(path: Path, topology: str, seeds, loop, training_settings: str 
         w_first=net.w_first,
         w_hidden=net.w_hidden,
         training=training_settings,
+        env=json.dumps(env_kwargs or {}),
     )
     tmp.replace(path)
 
@@ -118,6 +130,23 @@ def _trained_with(path: Path) -> str:
     """The ``training_settings`` a weights file was saved with ("" for a file saved without)."""
     with np.load(path) as z:
         return str(z["training"]) if "training" in z.files else ""
+
+
+def trained_env(path: Path) -> dict:
+    """The env settings a weights file was trained with (`save_weights`); {} (`env_for`'s defaults) if it has none."""
+    with np.load(path) as z:
+        return json.loads(str(z["env"])) if "env" in z.files else {}
+
+
+def env_settings(head_compensation: str, lag_tau: float) -> dict:
+    """``--head-compensation`` and ``--lag-tau`` as `robots.snake.training.env_for`'s keyword arguments."""
+    if head_compensation not in COMPENSATE_FROM:
+        raise UserError(
+            f"--head-compensation must be one of {', '.join(COMPENSATE_FROM)}, got {head_compensation!r}"
+        )
+    if not lag_tau > 0:
+        raise UserError(f"--lag-tau must be positive, got {lag_tau}")
+    return {"compensate_from": head_compensation} | ({"lag_tau": lag_tau} if head_compensation == "lagged" else {})
 
 
 def load_weights(path: Path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
@@ -215,7 +244,16 @@ def _load_npz(path: Path) -> dict:
 
 
 def run_share(
-    out: Path, topology: str, start: int, stop: int, steps: int, chunk: int, fingerprint: str, test_steps, progress=None
+    out: Path,
+    topology: str,
+    start: int,
+    stop: int,
+    steps: int,
+    chunk: int,
+    fingerprint: str,
+    test_steps,
+    env_kwargs=None,
+    progress=None,
 ) -> None:
     """Seeds ``start .. stop - 1`` of one topology: trained (unless ``out``'s weights have them) and tested.
 
@@ -225,7 +263,7 @@ def run_share(
     atomically and skipped when present, so a killed share resumes (its
     training from its checkpoints). ``progress(phase, done, total)``, if
     given, is called as training advances (``"train"``) and after each test
-    track (``"test"``).
+    track (``"test"``). ``env_kwargs`` go to `robots.snake.training.env_for`.
     """
     config = _config(topology)
     params = rstdp.network_params(config)
@@ -245,13 +283,14 @@ def run_share(
                 params,
                 seeds,
                 steps,
+                env=training.env_for("eight", frame_rows=config.roi[:2], **(env_kwargs or {})),
                 chunk_steps=chunk,
                 directory=out / "checkpoints" / _name(topology) / f"seeds-{start}-{stop}",
                 fingerprint=json.dumps([fingerprint, start, stop]),
                 progress=None if progress is None else (lambda done, total: progress("train", done, total)),
             )
             _save_npz(part / "training.npz", **_flatten(jax.device_get(result.records)))
-            save_weights(part / "weights.npz", topology, seeds, result.loop, fingerprint)
+            save_weights(part / "weights.npz", topology, seeds, result.loop, fingerprint, env_kwargs)
         _, _, w1, w2 = load_weights(part / "weights.npz")
     nets = networks_with(config, params, seeds, w1, w2)
     # A track and its mirror image run as one batch of twice the seeds (the same trials as two batches).
@@ -266,14 +305,16 @@ def run_share(
         if not all(done):
             both = jax.tree.map(lambda x: jnp.concatenate([x, x]), nets)
             mirror = np.repeat([False, True], len(seeds))
-            trace = training.test(config, params, both, base, test_steps, seeds=np.tile(seeds, 2), mirror=mirror)
+            trace = training.test(
+                config, params, both, base, test_steps, seeds=np.tile(seeds, 2), mirror=mirror, env_kwargs=env_kwargs
+            )
             for k, piece in enumerate(pieces):
                 _save_npz(piece, **{f: v[k * len(seeds) : (k + 1) * len(seeds)] for f, v in trace._asdict().items()})
         if progress is not None:
             progress("test", 2 * (i + 1), len(TEST_TRACKS))
 
 
-def _merge_shares(out: Path, topology: str, ranges, seeds: int, fingerprint: str, test_steps) -> None:
+def _merge_shares(out: Path, topology: str, ranges, seeds: int, fingerprint: str, test_steps, env_kwargs) -> None:
     """The shares' files of one topology as the whole run's (seed order), then the shares removed."""
     import shutil
 
@@ -293,6 +334,7 @@ def _merge_shares(out: Path, topology: str, ranges, seeds: int, fingerprint: str
             w_first=np.concatenate([w[2] for w in loaded]),
             w_hidden=np.concatenate([w[3] for w in loaded]),
             training=fingerprint,
+            env=json.dumps(env_kwargs or {}),
         )
     for name in TEST_TRACKS:
         length = _test_length(name, test_steps)
@@ -330,7 +372,7 @@ def _share_in_worker(queue, index, *args) -> None:
     run_share(*args, progress=lambda phase, done, total: queue.put((index, phase, done)))
 
 
-def _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, bars, executor) -> None:
+def _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, env_kwargs, bars, executor) -> None:
     """Every share of one topology: in this process (``executor`` None) or one a worker, progress drawn here."""
     if executor is None:
         for i, (a, b) in enumerate(ranges):
@@ -343,6 +385,7 @@ def _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, ba
                 chunk,
                 fingerprint,
                 test_steps,
+                env_kwargs,
                 progress=lambda phase, done, total, i=i: bars.update(i, phase, done),
             )
         return
@@ -352,7 +395,9 @@ def _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, ba
     with multiprocessing.get_context("spawn").Manager() as manager:
         q = manager.Queue()
         futures = [
-            executor.submit(_share_in_worker, q, i, out, topology, a, b, steps, chunk, fingerprint, test_steps)
+            executor.submit(
+                _share_in_worker, q, i, out, topology, a, b, steps, chunk, fingerprint, test_steps, env_kwargs
+            )
             for i, (a, b) in enumerate(ranges)
         ]
         while not all(f.done() for f in futures):
@@ -374,12 +419,15 @@ def run(
     chunk_steps: int | None = None,
     progress: bool = True,
     workers: int | None = 1,
+    env_kwargs=None,
 ) -> list[list]:
     """Train, test, write everything in the module docstring; returns the table's rows.
 
     ``workers``: processes, one a core (`spikejax.workers.pool`), each
     training and testing a contiguous share of the seeds; 1 runs everything
     in this process, None one a core. The results do not depend on it.
+    ``env_kwargs``: the env's settings beside `robots.snake.training.env_for`'s
+    defaults (`env_settings`), for training and test alike.
     """
     from spikejax import workers as pools
 
@@ -396,10 +444,10 @@ def run(
         for topology in topologies:
             config, t0 = _config(topology), time.time()
             weights = out / "weights" / f"{_name(topology)}.npz"
-            fingerprint = json.dumps([dataclasses.asdict(config), seeds, steps, chunk])
+            fingerprint = json.dumps([dataclasses.asdict(config), seeds, steps, chunk, env_kwargs or {}])
             if weights.exists() and _trained_with(weights) != fingerprint:
                 raise UserError(
-                    f"{weights} was trained with other settings (seeds, --train-laps or the topology's); "
+                    f"{weights} was trained with other settings (seeds, --train-laps, the env's or the topology's); "
                     "give another --out"
                 )
             lengths = [_test_length(name, test_steps) for name in TEST_TRACKS]
@@ -409,10 +457,12 @@ def run(
             if not (weights.exists() and tested):
                 bars = _Bars(topology, steps, len(ranges), progress)
                 try:
-                    _run_shares(out, topology, ranges, steps, chunk, fingerprint, test_steps, bars, executor)
+                    _run_shares(
+                        out, topology, ranges, steps, chunk, fingerprint, test_steps, env_kwargs, bars, executor
+                    )
                 finally:
                     bars.close()
-                _merge_shares(out, topology, ranges, seeds, fingerprint, test_steps)
+                _merge_shares(out, topology, ranges, seeds, fingerprint, test_steps, env_kwargs)
             train_records[topology] = _load_npz(out / "training" / f"{_name(topology)}.npz")
             for name, length in zip(TEST_TRACKS, lengths):
                 trace = _load_npz(out / "tests" / f"{_name(topology)}-{name}-{length}.npz")
@@ -645,6 +695,18 @@ def _add_reproduce_arguments(parser) -> None:
         "--test-steps", type=count, default=None, help="control steps per test track (default: one pass)"
     )
     parser.add_argument(
+        "--head-compensation",
+        default=training.COMPENSATION,
+        help=f"what the head compensation reads: {', '.join(COMPENSATE_FROM)} (default {training.COMPENSATION}: "
+        "the joint targets with the steering low-passed over --lag-tau)",
+    )
+    parser.add_argument(
+        "--lag-tau",
+        type=float,
+        default=training.LAG_TAU,
+        help=f"s, the low-pass of the steering that the lagged compensation reads (default {training.LAG_TAU})",
+    )
+    parser.add_argument(
         "--workers",
         type=count,
         default=None,
@@ -653,11 +715,23 @@ def _add_reproduce_arguments(parser) -> None:
     )
 
 
-def run_reproduce(*, out, seeds, train_laps, topologies, test_steps, no_progress, workers=None) -> int:
+def run_reproduce(
+    *,
+    out,
+    seeds,
+    train_laps,
+    topologies,
+    test_steps,
+    no_progress,
+    workers=None,
+    head_compensation=training.COMPENSATION,
+    lag_tau=training.LAG_TAU,
+) -> int:
     """``spikejax reproduce snake-rstdp --out DIR``: `run`, and its table printed."""
     if not train_laps > 0:
         raise UserError(f"--train-laps must be positive, got {train_laps}")
     names = _topologies(topologies)
+    env_kwargs = env_settings(head_compensation, lag_tau)
     with output_directory(out, command="reproduce snake-rstdp") as out:
         rows = run(
             out,
@@ -667,6 +741,7 @@ def run_reproduce(*, out, seeds, train_laps, topologies, test_steps, no_progress
             test_steps=test_steps,
             progress=not no_progress,
             workers=workers,
+            env_kwargs=env_kwargs,
         )
         _print(rows)
         print(f"wrote {out}/snake_rstdp.csv, weights/, training/, snake_rstdp_*.png")
@@ -707,7 +782,7 @@ def run_evaluate(*, out, weights, track, steps, no_progress) -> int:
             config = _config(topology)
             params = rstdp.network_params(config)
             nets = networks_with(config, params, seeds, w1, w2)
-            trace = training.test(config, params, nets, the_track, steps, seeds=seeds)
+            trace = training.test(config, params, nets, the_track, steps, seeds=seeds, env_kwargs=trained_env(f))
             rows += test_rows(topology, name, trace, env.dt, _windows(env))
         write_csv(out / "snake_rstdp.csv", [dict(zip(HEADER, r)) for r in rows], HEADER)
         _print(rows)

@@ -35,7 +35,7 @@ import numpy as np
 
 from robots.snake import tracks
 from robots.snake.env import SNAKE_SPEED, SnakeEnv
-from robots.snake.head_swing import HEAD_SWING_JOINTS
+from robots.snake.head_swing import HEAD_SWING, HEAD_SWING_JOINTS
 from robots.snake.rstdp import NetworkConfig, NetworkParams, controller, network_init
 from spikejax import rollout
 from spikejax.errors import UserError
@@ -58,6 +58,8 @@ FRAME_ROWS = NetworkConfig.roi[:2]  # the rows env_for renders: those of Eq. (2)
 
 
 MAX_STEER = 0.125  # rad: C_o at D_body = 1; 0.25 stalls the gait, 0.15 and above oscillates under Eq. (5)
+COMPENSATION = "lagged"  # env_for's head compensation (`robots.snake.env.SnakeEnv`'s compensate_from)
+LAG_TAU = 1.0  # s: the low-pass of C_o that "lagged" reads (1-4 s measured alike on the basic net)
 
 
 def env_for(track="eight", **kwargs) -> SnakeEnv:
@@ -68,18 +70,24 @@ def env_for(track="eight", **kwargs) -> SnakeEnv:
     wound Eq. (5)'s integrator into oscillations, and 0.25 rad nearly stops
     the slithering). Only `FRAME_ROWS` of the camera's frame are rendered
     (`check_frame_rows` refuses a network whose ROI reaches beyond them).
-    The head compensation reads the body's measured joints
-    (``compensate_from="joints"``): a network steers bang-bang, and the
-    compensation from the joint targets whips the head by 20-40 degrees at
-    each flip of ``D_body`` (`robots.snake.gait.joint_targets`), which is what
-    tripped the 40-degree failure rule in the ladder's turns. The head's
-    residual swing is cancelled (`robots.snake.head_swing.HEAD_SWING_JOINTS`):
-    the basic network has no head controller, and without it the target
-    sweeps 30 degrees across its view every gait period.
+
+    The head compensation (Sec. II-A) reads the joint targets with the
+    steering ``C_o`` low-passed over `LAG_TAU` (``compensate_from="lagged"``,
+    `COMPENSATION`): a network steers bang-bang, and the compensation from
+    the plain targets whips the head by 20-40 degrees at each flip of
+    ``D_body`` (`robots.snake.gait.joint_targets`), which is what tripped
+    the 40-degree failure rule in the ladder's turns; read from the measured
+    joints (``"joints"``) it has no whip but loops the head controller back
+    through the neck. The head's residual swing is cancelled
+    (`robots.snake.head_swing.HEAD_SWING`, or ``HEAD_SWING_JOINTS`` for
+    ``"joints"``): the basic network has no head controller, and without it
+    the target sweeps 30 degrees across its view every gait period.
     """
     kwargs.setdefault("frame_rows", FRAME_ROWS)
-    kwargs.setdefault("compensate_from", "joints")
-    kwargs.setdefault("head_swing", HEAD_SWING_JOINTS)
+    kwargs.setdefault("compensate_from", COMPENSATION)
+    if kwargs["compensate_from"] == "lagged":
+        kwargs.setdefault("lag_tau", LAG_TAU)
+    kwargs.setdefault("head_swing", HEAD_SWING_JOINTS if kwargs["compensate_from"] == "joints" else HEAD_SWING)
     kwargs.setdefault("drawn", True)
     kwargs.setdefault("max_steer", MAX_STEER)
     kwargs.setdefault("compact_events", False)
@@ -256,16 +264,18 @@ def test(
     seeds,
     mirror=False,
     progress=None,
+    env_kwargs=None,
 ) -> TestTrace:
     """Frozen networks (``networks``: a batched `robots.snake.rstdp.NetworkState`) on one pass of ``track``.
 
     ``mirror``: per member (or for all), whether it runs the track's mirror
-    image, so that a track and its mirror run as one batch.
+    image, so that a track and its mirror run as one batch. ``env_kwargs`` go
+    to `env_for` (the env the networks were trained in).
     """
     import dataclasses
 
     config = dataclasses.replace(config, learn=False)
-    env_kwargs = {"frame_rows": config.roi[:2]}
+    env_kwargs = {"frame_rows": config.roi[:2], **(env_kwargs or {})}
     return run_test(
         controller(config), params, networks, track, steps, seeds=seeds, env_kwargs=env_kwargs, mirror=mirror
     )
