@@ -182,9 +182,11 @@ class SnakeEnv(Env):
             runs back through the neck joints: see
             `robots.snake.steering.for_max_steer`), or ``"lagged"``, the
             targets with the steering ``C_o`` low-passed over ``lag_tau``
-            (the body's lag behind a step of ``C_o``, modelled: no whip, and
-            no loop through the neck).
-        lag_tau: the time constant of ``"lagged"``, s.
+            (no whip, and no loop through the neck: the head follows the
+            steering's trend, not each flip of a bang-bang controller;
+            `robots.snake.training.env_for`'s choice).
+        lag_tau: the time constant of ``"lagged"``, s. Not the servos' lag:
+            the odd joints follow a step of ``C_o`` within about 0.3 s.
         frame_rows: ``(row0, row1)``: render only those rows of the head
             camera's frame, the others left at 0 (no events); for controllers
             that read a band of the image (Eq. (2)'s region of interest).

@@ -209,8 +209,8 @@ def joint_targets(params: GaitParams, t, steer=0.0, head_offset=0.0, compensate=
             as the targets place it. The servos lag their targets, so a change
             of ``steer`` (which shifts all seven odd joints from joint 3 at
             once) moves the compensated target of joint 1 by ``-3.5`` times
-            that change in one step, while the body follows over a second:
-            the head whips, and a network steering bang-bang swings its own
+            that change in one step, while the odd joints take about 0.3 s
+            to follow it: the head whips, and a network steering bang-bang swings its own
             camera by 20-40 degrees (`robots.snake.training.env_for`).
 
     Returns:

@@ -86,10 +86,25 @@ def for_max_steer(max_steer: float, compensate_from: str = "targets") -> Steerin
     running-mean head angle, 0.70-1.08 degrees in the paper's window,
     2.5-2.7 instantaneous (body 5: 0.72-1.05; 5 / 1.4: 0.51-0.80; 2 / 1:
     2.0-3.6).
+
+    From the lagged targets (``"lagged"``, `robots.snake.training.env_for`'s
+    env) head gain 2 oscillates as well (13-17 degrees instantaneous): the
+    compensation leaves the head turned with the neck for about ``lag_tau``
+    after a change of ``C_o``, so the body gain moves the camera, and from
+    1.75 the head loop oscillates at any body gain. The gains for it are body
+    2 at 0.25 rad (4 at 0.125) and head 1.5, measured as above over body
+    gains 1-6 and head gains 1-2 (at 0.125 rad): no failure, 0.6-1.0
+    degrees in the paper's window, 0.9-1.1 instantaneous; body 0.5 at 0.25
+    rad lost the target on the ladder, and body 3 swung the head by 1.9-2.3
+    degrees.
     """
     if compensate_from not in COMPENSATE_FROM:
         raise UserError(f"compensate_from must be one of {', '.join(COMPENSATE_FROM)}, got {compensate_from!r}")
-    defaults = SteeringParams(gain=2.0, head_gain=1.25) if compensate_from == "joints" else SteeringParams()
+    defaults = {
+        "targets": SteeringParams(),
+        "joints": SteeringParams(gain=2.0, head_gain=1.25),
+        "lagged": SteeringParams(gain=2.0, head_gain=1.5),
+    }[compensate_from]
     return defaults._replace(gain=defaults.gain * 0.25 / max_steer)
 
 
