@@ -177,9 +177,9 @@ def test_reproduce_refuses_a_share_of_another_training(tmp_path):
 
 
 def test_evaluate_tests_weights_in_the_env_they_were_trained_in(tmp_path, monkeypatch):
-    from robots.snake import reproduce_rstdp
-
     from types import SimpleNamespace
+
+    from robots.snake import reproduce_rstdp
 
     loop = SimpleNamespace(controller=SimpleNamespace(w_first=np.zeros((2, 10, 2)), w_hidden=np.zeros((2, 8, 2))))
     seen = []
@@ -283,3 +283,14 @@ def test_reproduce_and_evaluate_small(tmp_path):
         "evaluate", "snake-rstdp", "--weights", str(out), "--track", str(track), "--out", str(tmp_path / "ev2")
     )
     assert r.returncode == 2 and "at least two" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_body_rule_share_counts_the_failures_with_the_head_inside_its_bound():
+    from robots.snake.reproduce_rstdp import body_rule_share
+
+    zeros = np.zeros((2, 6))
+    a_head = np.array([[0.1, 0.8, 0.2, 0.0, -0.75, 0.0], [0.0, 0.3, 0.0, 0.0, 0.0, -0.5]])  # rad; the bound 40 deg
+    failed = np.array([[1, 1, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]], bool)  # 0.1, 0.8, -0.75 and -0.5 rad fail
+    trace = training.TestTrace(a_head, zeros, zeros, zeros, failed, zeros, zeros, zeros)
+    assert body_rule_share(trace) == pytest.approx(2 / 4)
+    assert np.isnan(body_rule_share(trace._replace(failed=np.zeros_like(failed))))

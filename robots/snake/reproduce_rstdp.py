@@ -11,7 +11,8 @@ images) and writes, in ``--out``:
 
 * ``snake_rstdp.csv``: per topology, track and metric window, the seeds'
   mean of every metric of `robots.snake.metrics` with a 95 % interval over
-  seeds (Student t; Wilson for the share of seeds that ever failed), beside the
+  seeds (Student t; Wilson for the share of seeds that ever failed; the share
+  of the failures that the body-angle rule fired, `body_rule_share`), beside the
   paper's claim (separated < 2 degrees, basic < 4 degrees, unified resets
   every ~50 s);
 * ``weights/TOPOLOGY.npz``: the trained weights of every seed;
@@ -47,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from robots.snake import metrics, rstdp, tracks, training
-from robots.snake.env import COMPENSATE_FROM
+from robots.snake.env import COMPENSATE_FROM, LOST_HEAD_ANGLE
 from robots.snake.gait import gait_params, gait_period
 from spikejax.benchmarking import write_csv
 from spikejax.commands import Command, add_common, count, output_directory
@@ -79,6 +80,7 @@ HEADER = [
     "seeds_failed",
     "seeds_failed_ci_low",
     "seeds_failed_ci_high",
+    "failures_by_body_rule",
     "completed",
     "steering_changes_per_100s",
     "time_at_limit",
@@ -141,9 +143,7 @@ def trained_env(path: Path) -> dict:
 def env_settings(head_compensation: str, lag_tau: float) -> dict:
     """``--head-compensation`` and ``--lag-tau`` as `robots.snake.training.env_for`'s keyword arguments."""
     if head_compensation not in COMPENSATE_FROM:
-        raise UserError(
-            f"--head-compensation must be one of {', '.join(COMPENSATE_FROM)}, got {head_compensation!r}"
-        )
+        raise UserError(f"--head-compensation must be one of {', '.join(COMPENSATE_FROM)}, got {head_compensation!r}")
     if not lag_tau > 0:
         raise UserError(f"--lag-tau must be positive, got {lag_tau}")
     return {"compensate_from": head_compensation} | ({"lag_tau": lag_tau} if head_compensation == "lagged" else {})
@@ -174,6 +174,21 @@ def networks_with(config, params, seeds, w_first, w_hidden):
     return jax.vmap(one)(jnp.asarray(seeds, jnp.uint32), jnp.asarray(w_first), jnp.asarray(w_hidden))
 
 
+def body_rule_share(trace: training.TestTrace) -> float:
+    """The share of a trace's failures that the body-angle rule of Sec. III-B fired (NaN without failures).
+
+    At a failure either ``|a_head|`` passed `robots.snake.env.LOST_HEAD_ANGLE`
+    (the head rule) or the body's running-mean angle passed
+    ``LOST_BODY_ANGLE``; a failure with the head inside its bound is the
+    body rule's. A net with a head controller can keep the target centred
+    while its body turns away, and only this rule sees it.
+    """
+    failed = np.asarray(trace.failed, bool)
+    n = int(failed.sum())
+    body = int((failed & (np.abs(trace.a_head) <= LOST_HEAD_ANGLE)).sum())
+    return body / n if n else float("nan")
+
+
 def test_rows(topology: str, track_name: str, trace: training.TestTrace, dt: float, windows) -> list[list]:
     """Rows of ``snake_rstdp.csv`` for one topology on one track."""
     rows = []
@@ -190,6 +205,7 @@ def test_rows(topology: str, track_name: str, trace: training.TestTrace, dt: flo
         fpm, flo, fhi = mean_interval(col("failures_per_min"))
         failed = int(np.sum(col("failures_per_min") > 0))
         wlo, whi = wilson_interval(failed, n)
+        body_rule = body_rule_share(trace)
         rows.append(
             [
                 topology,
@@ -207,6 +223,7 @@ def test_rows(topology: str, track_name: str, trace: training.TestTrace, dt: flo
                 round(failed / n, 3),
                 round(float(wlo), 3),
                 round(float(whi), 3),
+                round(body_rule, 3),
                 round(float(col("completed").mean()), 3),
                 round(float(col("steering_changes_per_100s").mean()), 3),
                 round(float(col("time_at_limit").mean()), 3),
