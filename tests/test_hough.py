@@ -397,3 +397,74 @@ def test_reference_votes_equal_the_fast_votes():
             np.testing.assert_array_equal(
                 np.asarray(hough.votes(grid, one, signed=signed)), np.asarray(neuron.votes(grid, one, signed=signed))
             )
+
+
+# --- many streams: the dense line votes (`_fast._line_dense_sums`) --------------
+
+
+def _many_streams(rng, capacity=1024, n_slots=None):
+    """150 streams on the small line grid, in three groups of 50 (`_fast._groups`): the first two voted
+    densely (events up to the end of the buffer), the third by the event scatter (events only in its first
+    300 places); stream 7 has 200 events at one pixel, so its group sums its image in int16, not int8."""
+    shape = (150,) if n_slots is None else (150, n_slots)
+    x = rng.integers(-2, SMALL + 2, shape + (capacity,))  # a few off the sensor: no votes
+    y = rng.integers(0, SMALL, shape + (capacity,))
+    p = rng.choice([-1, 1], shape + (capacity,))
+    valid = rng.random(shape + (capacity,)) < 0.8
+    valid[100:, ..., 300:] = False
+    x[7, ..., :200], y[7, ..., :200], p[7, ..., :200], valid[7, ..., :200] = 3, 4, 1, True
+    t = np.sort(rng.random(shape + (capacity,)), axis=-1)
+    return _events(x, y, t, p, valid)
+
+
+def test_many_streams_vote_as_each_alone():
+    grid = _small_grid("line")
+    events = _many_streams(np.random.default_rng(21))
+    assert events.x.shape[0] >= 3 * 50 and hough._fast.DENSE_MIN_STREAMS <= 50
+    for signed in (True, False):
+        together = np.asarray(jax.jit(jax.vmap(lambda e: hough.line_votes(grid, e, signed=signed)))(events))
+        for i in (0, 7, 49, 50, 99, 100, 149):
+            one = jax.tree.map(lambda a: a[i], events)
+            np.testing.assert_array_equal(together[i], np.asarray(neuron.votes(grid, one, signed=signed)))
+        assert np.abs(together[7]).max() >= 200 and np.abs(together[100:]).sum() > 0
+
+
+def test_many_streams_count_in_int32_past_int16():
+    grid = _small_grid("line")
+    capacity = 2**15  # a slot's counts could then pass 2^15 - 1
+    rng = np.random.default_rng(22)
+    x, y = rng.integers(0, SMALL, (32, capacity)), rng.integers(0, SMALL, (32, capacity))
+    x[0], y[0] = 5, 6  # every event of stream 0 at one pixel: 32,768 votes in each of its cells
+    events = _events(x, y, p=np.ones((32, capacity)), valid=np.ones((32, capacity), bool))
+    together = np.asarray(jax.jit(jax.vmap(lambda e: hough.line_votes(grid, e)))(events))
+    assert together[0].max() == capacity
+    for i in (0, 31):
+        one = jax.tree.map(lambda a: a[i], events)
+        np.testing.assert_array_equal(together[i], np.asarray(neuron.votes(grid, one)))
+
+
+def test_many_streams_run_sync_as_the_readable_reference():
+    # Per-stream thresholds, decay rates and slot times, a starting state with a time per cell; also nested.
+    grid = _small_grid("line")
+    rng = np.random.default_rng(23)
+    events = _many_streams(rng, capacity=640, n_slots=3)
+    times = jnp.asarray(1.0 + np.cumsum(rng.random((150, 3)), axis=1), jnp.float32)
+    v_th = jnp.asarray(rng.uniform(3.0, 9.0, 150), jnp.float32)
+    rate = jnp.asarray(rng.uniform(0.0, 4.0, 150), jnp.float32)
+    state = hough.HoughState(
+        jnp.asarray(rng.normal(0, 3, (150,) + grid.shape), jnp.float32),
+        jnp.asarray(rng.uniform(0, 1, (150,) + grid.shape), jnp.float32),
+    )
+
+    def runs(f):
+        return jax.jit(jax.vmap(lambda e, t, v, d, s: f(hough.hough_params(v, d), grid, e, t, s)))
+
+    ours = runs(hough.sync_run)(events, times, v_th, rate, state)
+    assert np.abs(np.asarray(ours[1])).reshape(150, -1).sum(axis=1).min() > 0
+    _assert_trees_equal(ours, runs(neuron.sync_run)(events, times, v_th, rate, state))
+    pairs = jax.tree.map(lambda a: a[:80].reshape((2, 40) + a.shape[1:]), (events, times, v_th, rate, state))
+
+    def nested(f):
+        return jax.jit(jax.vmap(jax.vmap(lambda e, t, v, d, s: f(hough.hough_params(v, d), grid, e, t, s))))
+
+    _assert_trees_equal(nested(hough.sync_run)(*pairs), nested(neuron.sync_run)(*pairs))

@@ -26,15 +26,24 @@ stream of the batch. Every ratio is quoted one core against one and all cores
 against all: the peers run one frame after another in one process, and, with
 several cores, in a pool of one process a core (each with the same frames,
 started together), as their users would spread frames over cores; spikejax
-runs each batch on one CPU device and split over all of them
-(`spikejax.devices.shard_batch`). ``x_peer`` is a row's rate over its peer's
+runs each batch on one CPU device in a process of its own held to one core
+(`_OneCoreRun`: XLA's thread pool then has one thread) and split over all
+devices of this process (`spikejax.devices.shard_batch`). ``x_peer`` is a row's rate over its peer's
 (skimage ``hough_line``, ``hough_circle``, the NumPy loop) on as many cores.
 
 Formulations measured (ratios in ``docs/ARCHITECTURE.md``, "Hough formulations
 (measured)"; ``benchmarks/hough_formulations.py`` measures them side by side),
 and why these won:
 
-* Line votes: scatter-adds of the ``n_theta`` cells of every event, read from a
+* Line votes of 32 streams or more (a batch of groups of 64): each stream's
+  events summed per pixel into an image laid out (pixel, stream), int8 when
+  every pixel's sum fits, and each cell the sum of the image rows of the pixels
+  on its line (the table inverted, cells sorted by line length into 8 blocks,
+  rows added four at a time): the same integers, 64 streams a vector, about
+  0.13 ms a frame whatever its events; the synchronous run keeps the layout
+  (cell, stream) from slot to slot. 2-3x the scatter below on these frames.
+* Line votes of fewer streams, or of slots too sparse for the dense sums to
+  pay: scatter-adds of the ``n_theta`` cells of every event, read from a
   static table of the rho bin of each (pixel, angle) (`spikejax.vision.hough.line_table`),
   gathered as uint16, summed in int32, 576 events at a time (the gathered cells
   stay in the L2 cache), and under ``vmap`` on a CPU one stream after another,
@@ -73,6 +82,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib.util
+import os
 import time
 from pathlib import Path
 
@@ -277,6 +287,32 @@ def _spikejax(shape: str, mode: str, events, batch: int, devices: int):
     return JaxRun(compiled, streams), row
 
 
+def _row_events(shape: str, mode: str):
+    """The events a row runs on: the line frames, or two slots of the circle frames (its cost is event-blind)."""
+    if shape == "line":
+        return frames("line")[0]
+    return jax.tree.map(lambda a: a[:2], frames("circle")[0])
+
+
+class _OneCoreRun:
+    """A spikejax row on one core, built in a process of its own (a `Processes` timer).
+
+    The process is held to one core before JAX starts, so XLA's CPU thread
+    pool has one thread, as on a one-core machine: a one-device row is then
+    one core against a peer's one process. (In a process that may use every
+    core, XLA runs a large loop on all of them, and holding its threads to one
+    core afterwards time-slices them.) ``info`` is the row.
+    """
+
+    def __init__(self, shape: str, mode: str, batch: int):
+        if hasattr(os, "sched_setaffinity"):
+            os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+        self._run, self.info = _spikejax(shape, mode, _row_events(shape, mode), batch, 1)
+
+    def __call__(self) -> float:
+        return self._run()
+
+
 def mode_difference(events, params=None) -> dict:
     """How far the synchronous mode's spikes are from the asynchronous mode's on the same slots.
 
@@ -383,14 +419,16 @@ def run(
                     cores=p,
                     parallel=cores_label(p, "process"),
                 )
-        # Two slots a stream for circles: the circle grid's run time does not depend on the events.
-        two = jax.tree.map(lambda a: a[:2], circle_events)
-        jobs = [("line", "sync", line_events, b) for b in batch_sizes(largest, POWERS_OF_4)]
-        jobs += [("circle", "sync", two, b) for b in batch_sizes(min(largest, 64), POWERS_OF_4)]
-        jobs += [("line", "async", line_events, b) for b in batch_sizes(min(largest, 256), POWERS_OF_4)]
-        for shape, mode, events, b in tqdm(jobs, desc="hough bench: compiling", disable=no_progress):
+        jobs = [("line", "sync", b) for b in batch_sizes(largest, POWERS_OF_4)]
+        jobs += [("circle", "sync", b) for b in batch_sizes(min(largest, 64), POWERS_OF_4)]
+        jobs += [("line", "async", b) for b in batch_sizes(min(largest, 256), POWERS_OF_4)]
+        for shape, mode, b in tqdm(jobs, desc="hough bench: compiling", disable=no_progress):
             for d in splits(b):
-                runner, row = _spikejax(shape, mode, events, b, d)
+                if d == 1:
+                    runner = stack.enter_context(Processes(_OneCoreRun, shape, mode, b))
+                    row = runner.info()[0]
+                else:
+                    runner, row = _spikejax(shape, mode, _row_events(shape, mode), b, d)
                 runs[row["implementation"], mode, b] = runner
                 rows[row["implementation"], mode, b] = row
         bar = tqdm(total=len(runs) * repeats, desc="hough bench: timing", disable=no_progress)

@@ -6,12 +6,19 @@ spike for spike and bit for bit (tested), arranged for XLA's CPU backend; the
 public functions of `spikejax.vision.hough` call them. What each arrangement
 was measured against: docs/BENCHMARKS.md, "Spiking Hough detectors".
 
-* Line votes: scatter-adds of each event's ``n_theta`` cells, read from the
-  static table `line_table` (gathered as uint16) into an int32 accumulator, a
-  few hundred events at a time so that the gathered cells stay in the cache;
-  under ``vmap`` on a CPU the streams are voted one after another, each into
-  its own cache-resident accumulator (a custom batching rule, the one place
-  that asks for the backend).
+* Line votes, a stream alone or a few: scatter-adds of each event's
+  ``n_theta`` cells, read from the static table `line_table` (gathered as
+  uint16) into an int32 accumulator, a few hundred events at a time so that
+  the gathered cells stay in the cache; under ``vmap`` on a CPU the streams
+  are voted one after another, each into its own cache-resident accumulator
+  (a custom batching rule, the one place that asks for the backend).
+* Line votes and the synchronous run, from `DENSE_MIN_STREAMS` streams on
+  under ``vmap`` on a CPU: groups of 64 streams laid out ``(cell, stream)``;
+  each stream's events summed into its image, and every cell the sum of the
+  image rows of the pixels on its line (`_line_dense_sums`): the same
+  integers, vectorised across the 64 streams of a row, 2-3x faster than the
+  scatter on the bench frames. `sync_run` keeps that layout from the first
+  slot to the last (`_line_sync_group`).
 * Circle votes: the event image convolved with the ring kernels by FFT.
 * Lateral inhibition (sync): the box dilation as ORs of shifted slices.
 * The asynchronous loop steps over event positions with every stream of the
@@ -89,6 +96,10 @@ def line_votes(grid: LineGrid, events: Events, *, signed: bool = True) -> jax.Ar
     return _line_accumulator(grid, signed, merge=grid.merge_pixels)(events)
 
 
+# Events voted at a time by `_line_accumulator`: their cells stay in the L2 cache.
+VOTE_CHUNK = 576
+
+
 @functools.cache
 def _compact_table(grid: LineGrid) -> np.ndarray:
     """`line_table` as uint16 where the cells fit: half the bytes to gather per event."""
@@ -97,7 +108,7 @@ def _compact_table(grid: LineGrid) -> np.ndarray:
 
 
 @functools.cache
-def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576, merge: bool = False):
+def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = VOTE_CHUNK, merge: bool = False):
     """`line_votes` for one stream: scatter-adds of the events' table rows.
 
     With ``merge``, the events at the same pixel are first summed into one
@@ -156,7 +167,160 @@ def _line_accumulator(grid: LineGrid, signed: bool, chunk: int = 576, merge: boo
         acc, _ = jax.lax.scan(maybe_add, jnp.zeros((grid.size + 1,), jnp.int32), (starts, pixel, w))
         return acc[: grid.size].reshape(grid.shape).astype(jnp.float32)
 
-    return _one_stream_at_a_time(accumulate)
+    batched = jax.custom_batching.custom_vmap(accumulate)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, events):
+        events = _broadcast_unbatched(axis_size, in_batched[0], events)
+        if jax.default_backend() != "cpu":
+            out = jax.vmap(accumulate)(events)
+        elif axis_size < DENSE_MIN_STREAMS:
+            out = jax.lax.map(batched, events)
+        else:
+            out = _line_votes_by_groups(grid, signed, events, lambda e: jax.lax.map(batched, e))
+        return out, True
+
+    return batched
+
+
+# Streams voted together by `_line_dense_sums` (64 int8 or int16 counts a row: shorter rows vectorise poorly,
+# and a group's potentials, 8 MB at 64 streams, stay in the L3 cache), and the fewest for which a batch is.
+DENSE_GROUP = 64
+DENSE_MIN_STREAMS = 32
+# Events a stream at which `_line_dense_sums` (0.13 ms a stream, whatever its events) costs what the event
+# scatter costs (0.30 us an event); measured on a 2-core AMD EPYC, docs/BENCHMARKS.md.
+DENSE_MIN_EVENTS = 430
+
+
+@functools.cache
+def _line_pixel_lists(grid: LineGrid, blocks: int = 8, unroll: int = 4) -> tuple[list[np.ndarray], np.ndarray]:
+    """`line_table` inverted: the pixels on each cell's line, for `_line_dense_sums`.
+
+    Returns ``(lists, order)``: the cells sorted by how many pixels vote for
+    them (most first), split into ``blocks`` blocks; ``lists[i]`` is block
+    ``i``'s ``(steps, unroll, cells)`` int32 pixel indices, padded with the
+    index ``height * width`` (a pixel that is always 0); ``order`` the inverse
+    of that sort (``concatenate(blocks)[order]`` is in cell order). Sorting
+    keeps the padding at a fifth of the entries.
+    """
+    n_pixels = grid.height * grid.width
+    table = line_table(grid)
+    cells = table.reshape(-1)
+    pixels = np.repeat(np.arange(n_pixels, dtype=np.int32), grid.n_theta)
+    keep = cells < grid.size
+    cells, pixels = cells[keep], pixels[keep]
+    by_cell = np.argsort(cells, kind="stable")
+    cells, pixels = cells[by_cell], pixels[by_cell]
+    counts = np.bincount(cells, minlength=grid.size)
+    rank = np.arange(cells.size) - (np.cumsum(counts) - counts)[cells]
+    longest = -(-max(int(counts.max()), 1) // unroll) * unroll
+    padded = np.full((grid.size, longest), n_pixels, np.int32)
+    padded[cells, rank] = pixels
+    sort = np.argsort(-counts, kind="stable")
+    lists = []
+    for block in np.array_split(sort, blocks):
+        steps = -(-max(int(counts[block].max()), 1) // unroll)
+        lists.append(padded[block, : steps * unroll].T.reshape(steps, unroll, block.size).copy())
+    return lists, np.argsort(sort).astype(np.int32)
+
+
+def _vote_dtype(events: Events):
+    """int16 when a slot's capacity bounds every count below 2^15 (each event adds +-1), else int32."""
+    return jnp.int16 if events.x.shape[-1] < 2**15 else jnp.int32
+
+
+def _line_dense_sums(grid: LineGrid, signed: bool, events: Events) -> jax.Array:
+    """The line accumulators of a group of ``G`` streams at once: ``(grid.size, G)`` integers (`_vote_dtype`).
+
+    The votes are linear in the events, so a cell's count is the sum, over the
+    pixels on its line, of the events' weights summed per pixel: each stream's
+    events are first summed into its image, laid out ``(pixel, stream)``, and
+    then every cell adds up the image rows of its line's pixels
+    (`_line_pixel_lists`), all ``G`` streams in one contiguous row. That is
+    the same integers as the per-event scatter, for ``height * width *
+    n_theta`` row additions a group whatever its events: a CPU vectorises
+    them across the streams, where a scatter-add of each event's cells runs
+    one cell at a time. The image is read as int8 when every pixel's sum fits
+    (the rows are then half as long), the rows added four at a time.
+    """
+    group = events.x.shape[0]
+    n_pixels = grid.height * grid.width
+    dtype = _vote_dtype(events)
+    pixel, ok = jax.vmap(lambda e: _pixel(grid, e))(events)
+    w = jnp.where(ok, events.p if signed else 1, 0).astype(dtype)
+    slot = jnp.where(ok, pixel, n_pixels) * group + jnp.arange(group, dtype=jnp.int32)[:, None]
+    image = jnp.zeros(((n_pixels + 1) * group,), dtype)
+    image = image.at[slot.reshape(-1)].add(w.reshape(-1), mode="promise_in_bounds").reshape(n_pixels + 1, group)
+    lists, order = _line_pixel_lists(grid)
+
+    def sums(image):
+        out = []
+        for pixels in lists:
+            pixels = jnp.asarray(pixels)
+
+            def add(i, acc, pixels=pixels):
+                for row in pixels[i]:
+                    acc = acc + image.at[row].get(mode="promise_in_bounds").astype(dtype)
+                return acc
+
+            out.append(jax.lax.fori_loop(0, pixels.shape[0], add, jnp.zeros((pixels.shape[2], group), dtype)))
+        return jnp.concatenate(out)[jnp.asarray(order)]
+
+    small = jnp.max(jnp.abs(image)) <= 127
+    return jax.lax.cond(small, lambda image: sums(image.astype(jnp.int8)), sums, image)
+
+
+def _line_group_sums(grid: LineGrid, signed: bool, events: Events, sparse) -> jax.Array:
+    """`_line_dense_sums` of a group, or, below `DENSE_MIN_EVENTS` events a stream, ``sparse`` transposed.
+
+    ``sparse`` maps the group's events to its ``(G, *grid.shape)`` float32
+    accumulators one stream at a time; both give the same integers.
+    """
+    group, capacity = events.x.shape
+    dtype = _vote_dtype(events)
+
+    def by_stream(events):
+        return sparse(events).reshape(group, grid.size).T.astype(dtype)
+
+    # The events the scatter would vote: each stream's up to its last valid one, in whole chunks.
+    n_chunks = -(-capacity // VOTE_CHUNK)
+    length = -(-capacity // n_chunks)
+    last = jnp.max(jnp.where(events.valid, jnp.arange(1, capacity + 1, dtype=jnp.int32), 0), axis=1)
+    busy = jnp.sum(-(-last // length) * length) >= DENSE_MIN_EVENTS * group
+    return jax.lax.cond(busy, lambda e: _line_dense_sums(grid, signed, e), by_stream, events)
+
+
+def _groups(batch: int) -> tuple[int, int]:
+    """``(n_groups, group)``: a batch split into groups of at most about `DENSE_GROUP`, a multiple of 64."""
+    n_groups = -(-batch // DENSE_GROUP)
+    group = -(-batch // n_groups)
+    return n_groups, -(-group // 64) * 64  # rows of fewer than 64 streams vectorise poorly
+
+
+def _grouped(tree, n_groups: int, group: int):
+    """Leading axis padded to ``n_groups * group`` (with zeros: invalid events) and split ``(n_groups, group)``."""
+
+    def split(a):
+        a = jnp.pad(a, [(0, n_groups * group - a.shape[0])] + [(0, 0)] * (a.ndim - 1))
+        return a.reshape((n_groups, group) + a.shape[1:])
+
+    return jax.tree.map(split, tree)
+
+
+def _ungrouped(tree, batch: int):
+    return jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:])[:batch], tree)
+
+
+def _line_votes_by_groups(grid: LineGrid, signed: bool, events: Events, sparse) -> jax.Array:
+    """`line_votes` of a batch of streams, a group at a time (`_line_group_sums`)."""
+    batch = events.x.shape[0]
+    n_groups, group = _groups(batch)
+
+    def one_group(events):
+        acc = _line_group_sums(grid, signed, events, sparse)
+        return acc.T.reshape((group,) + grid.shape).astype(jnp.float32)
+
+    return _ungrouped(jax.lax.map(one_group, _grouped(events, n_groups, group)), batch)
 
 
 def event_image(grid, events: Events, *, signed: bool = True) -> jax.Array:
@@ -243,13 +407,13 @@ def votes(grid: Grid, events: Events, *, signed: bool = True) -> jax.Array:
 # --- neurons -------------------------------------------------------------------
 
 
-def _neighbourhood(fired: jax.Array) -> jax.Array:
-    """`spikejax.vision.hough.neuron.neighbourhood`, as a box dilation one axis at a time.
+def _neighbourhood(fired: jax.Array, axes=None) -> jax.Array:
+    """`spikejax.vision.hough.neuron.neighbourhood`, as a box dilation one axis at a time (``axes``: all).
 
     The OR of three shifted slices of the padded mask per axis: XLA's CPU
     ``reduce_window`` is a generic loop, slower.
     """
-    for axis in range(fired.ndim):
+    for axis in range(fired.ndim) if axes is None else axes:
         n = fired.shape[axis]
         padded = jnp.pad(fired, [(1, 1) if a == axis else (0, 0) for a in range(fired.ndim)])
         shifted = [jax.lax.slice_in_dim(padded, i, i + n, axis=axis) for i in range(3)]
@@ -275,16 +439,117 @@ def sync_update(params: HoughParams, state: HoughState, slot_votes: jax.Array, t
 def sync_run(
     params: HoughParams, grid: Grid, events: Events, times, state: HoughState | None = None
 ) -> tuple[HoughState, jax.Array]:
-    """`sync_step` over time slots (a ``lax.scan``)."""
+    """`sync_step` over time slots (a ``lax.scan``); for a line grid under ``vmap``, `_line_sync_streams`."""
     times = jnp.asarray(times, jnp.float32)
     if state is None:
         state = init(grid, times[0])
+    if isinstance(grid, LineGrid):
+        return _line_sync_streams(grid)(params, state, events, times)
+    return _sync_scan(params, grid, state, events, times)
 
+
+def _sync_scan(params: HoughParams, grid: Grid, state: HoughState, events: Events, times):
     def body(state, slot):
         ev, t = slot
         return sync_step(params, grid, state, ev, t)
 
     return jax.lax.scan(body, state, (events, times))
+
+
+@functools.cache
+def _line_sync_streams(grid: LineGrid):
+    """`sync_run` on a line grid for one stream; under ``vmap`` on a CPU, `_line_sync_batch`.
+
+    From `DENSE_MIN_STREAMS` streams on, the batch runs in groups laid out
+    ``(cell, stream)`` from the first slot to the last (`_line_sync_group`);
+    fewer streams run the plain scan batched. Nested ``vmap``s fold into one
+    batch of streams.
+    """
+
+    def plain(params, state, events, times):
+        return _sync_scan(params, grid, state, events, times)
+
+    @jax.custom_batching.custom_vmap
+    def streams(params, state, events, times):  # a leading stream axis on every leaf
+        return _line_sync_batch(params, grid, state, events, times)
+
+    @streams.def_vmap
+    def _fold(axis_size, in_batched, *args):
+        args = _broadcast_unbatched(axis_size, tuple(in_batched), args)
+        out = streams(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        out = jax.tree.map(lambda a: a.reshape((axis_size, -1) + a.shape[1:]), out)
+        return out, jax.tree.map(lambda _: True, out)
+
+    one = jax.custom_batching.custom_vmap(plain)
+
+    @one.def_vmap
+    def _batch(axis_size, in_batched, *args):
+        args = _broadcast_unbatched(axis_size, tuple(in_batched), args)
+        if jax.default_backend() == "cpu" and axis_size >= DENSE_MIN_STREAMS:
+            out = streams(*args)
+        else:
+            out = jax.vmap(plain)(*args)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return one
+
+
+def _line_sync_batch(params: HoughParams, grid: LineGrid, state: HoughState, events: Events, times):
+    """`sync_run` of ``B`` streams (a leading axis on every leaf), `_line_sync_group` a group at a time."""
+    batch = state.v.shape[0]
+    if times.shape[1] == 0:
+        return jax.vmap(lambda *a: _sync_scan(a[0], grid, *a[1:]))(params, state, events, times)
+    n_groups, group = _groups(batch)
+    args = _grouped((params, state, events, times), n_groups, group)
+    return _ungrouped(jax.lax.map(lambda a: _line_sync_group(grid, *a), args), batch)
+
+
+def _line_sync_group(grid: LineGrid, params: HoughParams, state: HoughState, events: Events, times):
+    """`sync_run` of a group of ``G`` streams with the state laid out ``(theta, rho, stream)`` throughout.
+
+    Each slot's votes come from `_line_group_sums` in that layout, so nothing
+    is transposed between slots; the update is `sync_update`'s arithmetic
+    with the per-stream parameters and times as rows, the 3 x 3 inhibition
+    over the first two axes. The same floats as the plain scan, bit for bit.
+    """
+    group = state.v.shape[0]
+
+    def cells_first(a):
+        return jnp.moveaxis(a.reshape(group, grid.size), 0, -1).reshape(grid.shape + (group,))
+
+    sparse = _line_accumulator(grid, True, merge=grid.merge_pixels)
+    v_th, rate = params.v_th, params.decay  # (G,)
+    # The decay rate as an array of the grid's shape, not a broadcast row: XLA then computes each cell's
+    # ``rate * (t - t_last)`` within its update, as the one-stream scan does (its rounding included: a CPU
+    # may fuse the product into the subtraction), rather than once a row.
+    rate_cells = jax.lax.optimization_barrier(jnp.broadcast_to(rate, grid.shape + (group,)))
+
+    def step(v, t_last, events, t):  # events (G, capacity), t (G,)
+        votes = _line_group_sums(grid, True, events, lambda e: jax.lax.map(sparse, e)).reshape(grid.shape + (group,))
+        v = decay(v, rate_cells * (t - t_last)) + votes.astype(jnp.float32)
+        fired = jnp.abs(v) >= v_th
+        spikes = jnp.where(fired, jnp.sign(v), 0.0).astype(jnp.int8)
+        return jnp.where(_neighbourhood(fired, axes=(0, 1)), 0.0, v), spikes
+
+    # Every cell is first decayed from its own last update to the first slot's
+    # time; the scan then carries the last update's time as one row (the first
+    # slot's decay by 0 leaves each potential as it is, bit for bit).
+    events = jax.tree.map(lambda a: jnp.moveaxis(a, 1, 0), events)
+    times = jnp.moveaxis(times, 1, 0)
+    v = decay(cells_first(state.v), rate * (times[0] - cells_first(state.t)))
+
+    def body(carry, slot):
+        v, t_last = carry
+        v, spikes = step(v, t_last, *slot)
+        return (v, slot[1]), spikes
+
+    (v, t_last), spikes = jax.lax.scan(body, (v, times[0]), (events, times))
+
+    def streams_first(a):
+        return jnp.moveaxis(a, -1, 0)
+
+    state = HoughState(streams_first(v), jnp.broadcast_to(t_last[:, None, None], (group,) + grid.shape))
+    return state, jnp.moveaxis(spikes, -1, 0)
 
 
 def _line_wiring(grid: LineGrid):
