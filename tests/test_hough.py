@@ -468,3 +468,15 @@ def test_many_streams_run_sync_as_the_readable_reference():
         return jax.jit(jax.vmap(jax.vmap(lambda e, t, v, d, s: f(hough.hough_params(v, d), grid, e, t, s))))
 
     _assert_trees_equal(nested(hough.sync_run)(*pairs), nested(neuron.sync_run)(*pairs))
+
+
+def test_neighbourhood_by_words_is_the_box_dilation():
+    rng = np.random.default_rng(24)
+    for shape in [(3, 64), (4, 5, 96), (2, 32)]:
+        fired = rng.random(shape) < 0.05
+        fired[..., 31] = fired[..., 32 % shape[-1]] = True  # across a word boundary
+        fired[..., -1] = True  # at the last cell: nothing wraps around
+        np.testing.assert_array_equal(
+            np.asarray(hough._fast._neighbourhood_by_words(jnp.asarray(fired))),
+            np.asarray(neuron.neighbourhood(jnp.asarray(fired))),
+        )
