@@ -480,3 +480,25 @@ def test_neighbourhood_by_words_is_the_box_dilation():
             np.asarray(hough._fast._neighbourhood_by_words(jnp.asarray(fired))),
             np.asarray(neuron.neighbourhood(jnp.asarray(fired))),
         )
+
+
+def test_circle_streams_under_vmap_step_and_run_as_the_readable_reference():
+    # Circle grids run their streams one after another under vmap (`_fast._circle_streams`): from a given
+    # state, by steps and by runs, per-stream thresholds.
+    grid = _small_grid("circle")
+    streams = [_scene_events("circle", variant) for variant in range(3)]
+    events = jax.tree.map(lambda *a: jnp.stack(a), *(e for e, _ in streams))
+    times = streams[0][1]
+    rng = np.random.default_rng(25)
+    state = hough.HoughState(
+        jnp.asarray(rng.normal(0, 2, (3,) + grid.shape), jnp.float32),
+        jnp.asarray(rng.uniform(0, times[0], (3,) + grid.shape), jnp.float32),
+    )
+    v_th = jnp.asarray([3.0, 4.0, 5.0])
+    run = lambda f: jax.jit(jax.vmap(lambda e, v, s: f(hough.hough_params(v, 37.0), grid, e, times, s)))
+    ours = run(hough.sync_run)(events, v_th, state)
+    assert np.abs(np.asarray(ours[1])).reshape(3, -1).sum(axis=1).min() > 100
+    _assert_trees_equal(ours, run(neuron.sync_run)(events, v_th, state))
+    first = jax.tree.map(lambda a: a[:, 0], events)
+    step = lambda f: jax.jit(jax.vmap(lambda e, v, s: f(hough.hough_params(v, 37.0), grid, s, e, times[0])))
+    _assert_trees_equal(step(hough.sync_step)(first, v_th, state), step(neuron.sync_step)(first, v_th, state))

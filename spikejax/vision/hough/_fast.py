@@ -449,8 +449,30 @@ def _neighbourhood_by_words(fired: jax.Array) -> jax.Array:
 
 
 def sync_step(params: HoughParams, grid: Grid, state: HoughState, events: Events, t) -> tuple[HoughState, jax.Array]:
-    """`spikejax.vision.hough.neuron.sync_step` with the fast `votes` and `_neighbourhood`."""
+    """`spikejax.vision.hough.neuron.sync_step` with the fast `votes` and `_neighbourhood`.
+
+    On a circle grid, streams under ``vmap`` run one after another
+    (`_circle_streams`).
+    """
+    if isinstance(grid, CircleGrid):
+        return _circle_streams(grid, "step")(params, state, events, jnp.asarray(t, jnp.float32))
     return sync_update(params, state, votes(grid, events), t)
+
+
+@functools.cache
+def _circle_streams(grid: CircleGrid, what: str):
+    """`sync_step` (``what="step"``) or `_sync_scan` (``"run"``; ``"fresh"`` from `init`) of a circle grid,
+    one stream at a time under ``vmap``.
+
+    A stream's grid is 4 MB of potentials and its FFTs work on 64 spectra of
+    up to 192 x 97: batched, several streams' leave the caches, and on the
+    bench frames a batch of 4 ran at two thirds of the rate of one stream.
+    """
+    if what == "step":
+        return _one_stream_at_a_time(lambda p, s, e, t: sync_update(p, s, votes(grid, e), t))
+    if what == "fresh":
+        return _one_stream_at_a_time(lambda p, e, t: _sync_scan(p, grid, init(grid, t[0]), e, t))
+    return _one_stream_at_a_time(lambda p, s, e, t: _sync_scan(p, grid, s, e, t))
 
 
 def sync_update(params: HoughParams, state: HoughState, slot_votes: jax.Array, t) -> tuple[HoughState, jax.Array]:
@@ -467,13 +489,15 @@ def sync_update(params: HoughParams, state: HoughState, slot_votes: jax.Array, t
 def sync_run(
     params: HoughParams, grid: Grid, events: Events, times, state: HoughState | None = None
 ) -> tuple[HoughState, jax.Array]:
-    """`sync_step` over time slots (a ``lax.scan``); for a line grid under ``vmap``, `_line_sync_streams`."""
+    """`sync_step` over time slots (a ``lax.scan``); under ``vmap``, `_line_sync_streams` or `_circle_streams`."""
     times = jnp.asarray(times, jnp.float32)
+    if state is None and isinstance(grid, CircleGrid):  # each stream's grid made in its turn, not all at once
+        return _circle_streams(grid, "fresh")(params, events, times)
     if state is None:
         state = init(grid, times[0])
     if isinstance(grid, LineGrid):
         return _line_sync_streams(grid)(params, state, events, times)
-    return _sync_scan(params, grid, state, events, times)
+    return _circle_streams(grid, "run")(params, state, events, times)
 
 
 def _sync_scan(params: HoughParams, grid: Grid, state: HoughState, events: Events, times):
