@@ -571,10 +571,11 @@ def _line_sync_group(grid: LineGrid, params: HoughParams, state: HoughState, eve
 
     sparse = _line_accumulator(grid, True, merge=grid.merge_pixels)
     v_th, rate = params.v_th, params.decay  # (G,)
-    # The decay rate as an array of the grid's shape, not a broadcast row: XLA then computes each cell's
-    # ``rate * (t - t_last)`` within its update, as the one-stream scan does (its rounding included: a CPU
-    # may fuse the product into the subtraction), rather than once a row.
-    rate_cells = jax.lax.optimization_barrier(jnp.broadcast_to(rate, grid.shape + (group,)))
+    # The decay rate as a (1, rho, stream) array, not a broadcast row: XLA then computes each cell's
+    # ``rate * (t - t_last)`` within its update, as the one-stream scan does, its rounding included (a CPU
+    # may fuse the product into the subtraction, and does so there), rather than once a row: the same
+    # potentials bit for bit. (A (1, 1, stream) array is folded back into a row.)
+    rate_cells = jax.lax.optimization_barrier(jnp.broadcast_to(rate, (1, grid.n_rho, group)))
 
     def step(v, t_last, events, t):  # events (G, capacity), t (G,)
         votes = _line_group_sums(grid, True, events, lambda e: jax.lax.map(sparse, e)).reshape(grid.shape + (group,))
