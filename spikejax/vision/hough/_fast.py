@@ -193,7 +193,7 @@ DENSE_MIN_EVENTS = 430
 
 
 @functools.cache
-def _line_pixel_lists(grid: LineGrid, blocks: int = 8, unroll: int = 4) -> tuple[list[np.ndarray], np.ndarray]:
+def _line_pixel_lists(grid: LineGrid, blocks: int = 32, unroll: int = 4) -> tuple[list[np.ndarray], np.ndarray]:
     """`line_table` inverted: the pixels on each cell's line, for `_line_dense_sums`.
 
     Returns ``(lists, order)``: the cells sorted by how many pixels vote for
@@ -201,7 +201,7 @@ def _line_pixel_lists(grid: LineGrid, blocks: int = 8, unroll: int = 4) -> tuple
     ``i``'s ``(steps, unroll, cells)`` int32 pixel indices, padded with the
     index ``height * width`` (a pixel that is always 0); ``order`` the inverse
     of that sort (``concatenate(blocks)[order]`` is in cell order). Sorting
-    keeps the padding at a fifth of the entries.
+    keeps the padding at 7 % of the entries (3.17 M for 2.95 M on the paper's grid).
     """
     n_pixels = grid.height * grid.width
     table = line_table(grid)
