@@ -341,11 +341,11 @@ def _fft_size(n: int, reach: int) -> int:
 
 
 @functools.cache
-def _ring_spectra(grid: CircleGrid) -> tuple[tuple[int, int, int, np.ndarray], ...]:
+def _ring_spectra(grid: CircleGrid) -> tuple[tuple[int, int, np.ndarray], ...]:
     """The ring kernels' real FFTs, complex64, computed once on the host (constants of the program).
 
     The radii are grouped by the FFT size their rings need (`_fft_size` of the
-    largest offset): ``(ny, nx, first radius, spectra (radii, ny, nx // 2 + 1))``
+    largest offset): ``(ny, nx, spectra (radii, ny, nx // 2 + 1))``
     per group, in radius order. A small ring convolved at the size of the
     largest would cost up to 2x more.
     """
@@ -367,14 +367,14 @@ def _ring_spectra(grid: CircleGrid) -> tuple[tuple[int, int, int, np.ndarray], .
             # An event at (x, y) votes for the centre (x + da, y + db): the kernel is the
             # ring itself, placed at (db mod ny, da mod nx).
             kernels[i, ring[:, 1] % ny, ring[:, 2] % nx] = 1.0
-        out.append((ny, nx, radii[0], np.fft.rfft2(kernels).astype(np.complex64)))
+        out.append((ny, nx, np.fft.rfft2(kernels).astype(np.complex64)))
     return tuple(out)
 
 
 def circle_image_votes(grid: CircleGrid, image: jax.Array) -> jax.Array:
     """`spikejax.vision.hough.circle_image_votes`: the image convolved with each ring by FFT, per size group."""
     parts = []
-    for ny, nx, _, spectra in _ring_spectra(grid):
+    for ny, nx, spectra in _ring_spectra(grid):
         spectrum = jnp.fft.rfft2(image, s=(ny, nx))
         parts.append(jnp.fft.irfft2(spectra * spectrum[None], s=(ny, nx))[:, : grid.height, : grid.width])
     return jnp.round(jnp.concatenate(parts))
