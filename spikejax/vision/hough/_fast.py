@@ -521,16 +521,7 @@ def _line_sync_streams(grid: LineGrid):
     def plain(params, state, events, times):
         return _sync_scan(params, grid, state, events, times)
 
-    @jax.custom_batching.custom_vmap
-    def streams(params, state, events, times):  # a leading stream axis on every leaf
-        return _line_sync_batch(params, grid, state, events, times)
-
-    @streams.def_vmap
-    def _fold(axis_size, in_batched, *args):
-        args = _broadcast_unbatched(axis_size, tuple(in_batched), args)
-        out = streams(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
-        out = jax.tree.map(lambda a: a.reshape((axis_size, -1) + a.shape[1:]), out)
-        return out, jax.tree.map(lambda _: True, out)
+    streams = _folding_nested_vmaps(lambda *args: _line_sync_batch(args[0], grid, *args[1:]))
 
     one = jax.custom_batching.custom_vmap(plain)
 
@@ -747,6 +738,24 @@ def async_run(
     return _async_streams(grid)(params, state, events)
 
 
+def _folding_nested_vmaps(fn):
+    """``fn`` (every leaf of every argument with a leading stream axis) with a ``vmap`` over it folded into that axis.
+
+    Under ``vmap`` the batch and stream axes merge into one batch of streams,
+    so nested ``vmap``s reach ``fn`` as a single flat batch.
+    """
+    streams = jax.custom_batching.custom_vmap(fn)
+
+    @streams.def_vmap
+    def _fold(axis_size, in_batched, *args):
+        args = _broadcast_unbatched(axis_size, tuple(in_batched), args)
+        out = streams(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
+        out = jax.tree.map(lambda a: a.reshape((axis_size, -1) + a.shape[1:]), out)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return streams
+
+
 def _broadcast_unbatched(axis_size, in_batched, args):
     return jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, in_batched)
 
@@ -758,16 +767,7 @@ def _async_streams(grid: Grid):
     Nested ``vmap``s fold into one batch of streams.
     """
 
-    @jax.custom_batching.custom_vmap
-    def streams(params, state, events):  # a leading stream axis on every leaf
-        return _async_batch(params, grid, state, events)
-
-    @streams.def_vmap
-    def _fold(axis_size, in_batched, params, state, events):
-        args = _broadcast_unbatched(axis_size, tuple(in_batched), (params, state, events))
-        out = streams(*jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), args))
-        out = jax.tree.map(lambda a: a.reshape((axis_size, -1) + a.shape[1:]), out)
-        return out, jax.tree.map(lambda _: True, out)
+    streams = _folding_nested_vmaps(lambda params, state, events: _async_batch(params, grid, state, events))
 
     @jax.custom_batching.custom_vmap
     def one(params, state, events):
