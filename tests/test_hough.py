@@ -403,7 +403,7 @@ def test_reference_votes_equal_the_fast_votes():
 
 
 def _many_streams(rng, capacity=1024, n_slots=None):
-    """150 streams on the small line grid, in three groups of 50 (`_fast._groups`): the first two voted
+    """150 streams on the small line grid, in three groups of 50 padded to 64 (`_fast._groups`): the first two voted
     densely (events up to the end of the buffer), the third by the event scatter (events only in its first
     300 places); stream 7 has 200 events at one pixel, so its group sums its image in int16, not int8."""
     shape = (150,) if n_slots is None else (150, n_slots)
@@ -462,6 +462,9 @@ def test_many_streams_run_sync_as_the_readable_reference():
     ours = runs(hough.sync_run)(events, times, v_th, rate, state)
     assert np.abs(np.asarray(ours[1])).reshape(150, -1).sum(axis=1).min() > 0
     _assert_trees_equal(ours, runs(neuron.sync_run)(events, times, v_th, rate, state))
+    first = jax.tree.map(lambda a: a[:32], (events, times, v_th, rate, state))  # one group of 32, not padded to 64
+    assert hough._fast._groups(32) == (1, 32)
+    _assert_trees_equal(runs(hough.sync_run)(*first), runs(neuron.sync_run)(*first))
     pairs = jax.tree.map(lambda a: a[:80].reshape((2, 40) + a.shape[1:]), (events, times, v_th, rate, state))
 
     def nested(f):
