@@ -350,13 +350,19 @@ def _fft_size(n: int, reach: int) -> int:
 
 
 @functools.cache
-def _ring_spectra(grid: CircleGrid) -> tuple[tuple[int, int, np.ndarray], ...]:
-    """The ring kernels' real FFTs, complex64, computed once on the host (constants of the program).
+def _ring_spectra(grid: CircleGrid) -> tuple[tuple[int, int, int, np.ndarray], ...]:
+    """The ring kernels' FFTs, two radii to a spectrum, complex64, computed once on the host (constants).
 
     The radii are grouped by the FFT size their rings need (`_fft_size` of the
-    largest offset): ``(ny, nx, spectra (radii, ny, nx // 2 + 1))``
-    per group, in radius order. A small ring convolved at the size of the
-    largest would cost up to 2x more.
+    largest offset; a small ring convolved at the size of the largest would
+    cost up to 2x more): ``(ny, nx, radii, spectra (pairs, ny, nx))`` per
+    group, in radius order. In a group of ``n`` radii, radius ``i`` is paired
+    with radius ``i + ceil(n / 2)`` and the pair's spectrum is ``F(k_a) + i
+    F(k_b)``: the image and the kernels are real, so one complex inverse FFT of
+    the image's spectrum times it gives both convolutions, the group's first
+    half as its real part and its second half as its imaginary part. (XLA's
+    CPU ``irfft2`` ran 3x slower than a complex ``ifft2`` of the same size
+    carrying two radii, measured.)
     """
     offsets = ring_offsets(grid)
     groups = []
@@ -370,22 +376,25 @@ def _ring_spectra(grid: CircleGrid) -> tuple[tuple[int, int, np.ndarray], ...]:
             groups.append((size, [k]))
     out = []
     for (ny, nx), radii in groups:
-        kernels = np.zeros((len(radii), ny, nx), np.float32)
+        kernels = np.zeros((2 * (-(-len(radii) // 2)), ny, nx))
         for i, k in enumerate(radii):
             ring = offsets[offsets[:, 0] == k]
             # An event at (x, y) votes for the centre (x + da, y + db): the kernel is the
             # ring itself, placed at (db mod ny, da mod nx).
             kernels[i, ring[:, 1] % ny, ring[:, 2] % nx] = 1.0
-        out.append((ny, nx, np.fft.rfft2(kernels).astype(np.complex64)))
+        spectra = np.fft.fft2(kernels)
+        half = spectra.shape[0] // 2
+        out.append((ny, nx, len(radii), (spectra[:half] + 1j * spectra[half:]).astype(np.complex64)))
     return tuple(out)
 
 
 def circle_image_votes(grid: CircleGrid, image: jax.Array) -> jax.Array:
-    """`spikejax.vision.hough.circle_image_votes`: the image convolved with each ring by FFT, per size group."""
+    """`spikejax.vision.hough.circle_image_votes`: the image convolved with each ring by FFT, two radii a transform."""
     parts = []
-    for ny, nx, spectra in _ring_spectra(grid):
-        spectrum = jnp.fft.rfft2(image, s=(ny, nx))
-        parts.append(jnp.fft.irfft2(spectra * spectrum[None], s=(ny, nx))[:, : grid.height, : grid.width])
+    h, w = grid.height, grid.width
+    for ny, nx, radii, spectra in _ring_spectra(grid):
+        both = jnp.fft.ifft2(spectra * jnp.fft.fft2(image, s=(ny, nx))[None])[:, :h, :w]
+        parts += [both.real, both.imag[: radii - both.shape[0]]]
     return jnp.round(jnp.concatenate(parts))
 
 
