@@ -35,7 +35,7 @@ Formulations measured (ratios in ``docs/ARCHITECTURE.md``, "Hough formulations
 (measured)"; ``benchmarks/hough_formulations.py`` measures them side by side),
 and why these won:
 
-* Line votes of 32 streams or more (a batch of groups of 64): each stream's
+* Line votes of 32 streams or more (a batch of groups of about 64, a multiple of 32): each stream's
   events summed per pixel into an image laid out (pixel, stream), int8 when
   every pixel's sum fits, and each cell the sum of the image rows of the pixels
   on its line (the table inverted, cells sorted by line length into 32 blocks,
@@ -62,8 +62,9 @@ and why these won:
   On the circle grid the last axis is packed 32 cells a word first (1.7x).
 * Circle votes: the event image convolved with the 64 ring kernels by FFT,
   each radius at the smallest size without wrap-around for its ring, rounded
-  up to a multiple of 8 (136 to 192; 1.5x one size of 192 for all),
-  independent of the number of events; scattering every event's ~13,000 ring
+  up to a multiple of 8 (136 to 192; 1.5x one size of 192 for all), two radii
+  to one complex inverse FFT as its real and imaginary parts (XLA's ``irfft2``
+  is about 3x slower per radius), independent of the number of events; scattering every event's ~13,000 ring
   cells is 100x more work. Under ``vmap`` the streams run one after another
   (a stream's 4 MB grid stays in the cache).
 * Async: one ``lax.scan`` over event positions for the whole batch; each step

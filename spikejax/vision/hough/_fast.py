@@ -13,14 +13,15 @@ was measured against: docs/BENCHMARKS.md, "Spiking Hough detectors".
   are voted one after another, each into its own cache-resident accumulator
   (a custom batching rule, the one place that asks for the backend).
 * Line votes and the synchronous run, from `DENSE_MIN_STREAMS` streams on
-  under ``vmap`` on a CPU: groups of 64 streams laid out ``(cell, stream)``;
+  under ``vmap`` on a CPU: groups of about 64 streams (a multiple of 32) laid out ``(cell, stream)``;
   each stream's events summed into its image, and every cell the sum of the
   image rows of the pixels on its line (`_line_dense_sums`): the same
   integers, vectorised across the 64 streams of a row, 2-3x faster than the
   scatter on the bench frames. `sync_run` keeps that layout from the first
   slot to the last (`_line_sync_group`).
 * Circle votes: the event image convolved with the ring kernels by FFT, each
-  radius at the smallest size (a multiple of 8) its ring needs.
+  radius at the smallest size (a multiple of 8) its ring needs, two radii to
+  a complex inverse FFT (the real and imaginary parts).
 * Lateral inhibition (sync): the box dilation as ORs of shifted slices.
 * The asynchronous loop steps over event positions with every stream of the
   batch at once: one gather of the ``(v, t_last)`` of the cells the events
