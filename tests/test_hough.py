@@ -159,6 +159,20 @@ def test_circle_votes_fft_and_scatter_equal_brute_force():
         np.testing.assert_array_equal(np.asarray(hough.circle_votes(grid, ev, method=method)), expected)
 
 
+def test_circle_image_votes_under_vmap_equal_each_streams_scatter():
+    # Batched images are convolved one at a time (`_fast._circle_image_streams`); odd size groups pair a
+    # radius with nothing (`_fast._ring_spectra`).
+    rng = np.random.default_rng(12)
+    grid = _small_grid("circle")
+    assert any(radii % 2 for _, _, radii, _ in hough._fast._ring_spectra(grid))
+    streams = [_random_events(rng, 60, grid.width, grid.height) for _ in range(3)]
+    images = jnp.stack([hough.event_image(grid, ev) for ev in streams])
+    together = np.asarray(jax.jit(jax.vmap(lambda im: hough.circle_image_votes(grid, im)))(images))
+    for ev, votes in zip(streams, together):
+        np.testing.assert_array_equal(votes, np.asarray(hough.circle_votes(grid, ev, method="scatter")))
+    assert np.abs(together).max() > 0
+
+
 @pytest.mark.parametrize("centre, radius", [((40, 30), 17), ((25, 38), 9)])
 def test_circle_detection_matches_skimage(centre, radius):
     rng = np.random.default_rng(3)
