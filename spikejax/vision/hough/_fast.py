@@ -298,9 +298,10 @@ def _line_group_sums(grid: LineGrid, signed: bool, events: Events, sparse) -> ja
 def _groups(batch: int) -> tuple[int, int]:
     """``(n_groups, group)``: a batch split into groups of at most about `DENSE_GROUP`, a multiple of 32.
 
-    Rows of 32 streams vectorise worse than rows of 64 (1.4x the time a
-    stream), but better than 32 streams padded to 64 (measured, one core:
-    the votes of 32 streams 6.8 ms a step in a row of 32, 9.4 padded to 64).
+    Rows of 32 streams vectorise worse than rows of 64 (the votes 1.2-1.3x
+    the time a stream), but better than 32 streams padded to 64 (measured,
+    one core: the votes of 32 streams 6.8 ms a step in a row of 32, 9.4
+    padded to 64; a whole `sync_run` 0.29 ms a stream-slot either way).
     """
     n_groups = -(-batch // DENSE_GROUP)
     group = -(-batch // n_groups)
