@@ -8,6 +8,8 @@ straight, for 16 s. The detector is the paper's (128 x 128 camera, 180 x 180
 line grid, sync, slots of 5 steps), nothing reduced.
 """
 
+from types import SimpleNamespace
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,6 +17,7 @@ import pytest
 
 from robots.snake import pipe_controller as pc
 from robots.snake import pipe_env, pipes
+from robots.snake.gait import gait_params, joint_targets
 from spikejax.errors import UserError
 
 SLOTS = 160  # 800 control steps, 16 s
@@ -211,3 +214,46 @@ def test_refilled_lanes_give_each_episode_the_trial_it_gets_alone(monkeypatch):
     assert list(refilled["end_step"][1:]) == [slots * 5] * 2  # the others run to the end
     for name in alone:
         np.testing.assert_array_equal(refilled[name], alone[name], err_msg=name)
+
+
+def test_action_1_narrows_the_gaits_lateral_amplitude_only():
+    """``action[1] = 1`` scales ``A_o`` of Eq. (1) by ``narrow``, halfway by half of it; 0 and negative leave the
+    gait alone. Compared uncompensated, where the lateral joints are Eq. (1) itself."""
+    gait = gait_params()
+    params = pipe_env.PipeEnvParams(jnp.float32(0.1), jnp.float32(0.05), jnp.float32(0.4))
+    t = 1.3
+    full = np.asarray(joint_targets(gait, t, 0.1, 0.0, compensate=False))
+    odd = np.arange(16) % 2 == 0  # joints 1, 3, ... (lateral) at even indices
+    for a1, factor in ((1.0, 0.4), (0.5, 0.7), (0.0, 1.0), (-1.0, 1.0)):
+        got = np.asarray(pipe_env.gait_targets(gait, params, t, jnp.array([1.0, a1]), compensate=False))
+        np.testing.assert_allclose(got[odd], (full[odd] - 0.1) * factor + 0.1, atol=1e-6)
+        np.testing.assert_allclose(got[~odd], full[~odd], atol=1e-6)
+    with pytest.raises(UserError, match="narrow"):
+        pipe_env.PipeEnv(narrow=0.0)
+
+
+def _slot_state(seen: bool, control: float, d_est: float):
+    valid = jnp.asarray(seen)
+    slot = SimpleNamespace(
+        body=SimpleNamespace(valid=valid), entry=SimpleNamespace(valid=jnp.asarray(False)), control=jnp.float32(control)
+    )
+    return SimpleNamespace(info={"slot": slot, "ended": jnp.asarray(True), "d_est": jnp.float32(d_est)})
+
+
+def test_the_blind_stretch_goes_straight_narrowed_for_its_dead_reckoned_time():
+    """APPROACH follows the detection's C at full width; a detection nearer than ``final_distance`` starts FINAL:
+    C = 0, ``action[1] = narrow``, for ``final_distance / speed + margin`` s of 20 ms steps, then INSIDE, still
+    narrowed; later detections change nothing."""
+    params = pc.ControllerParams(final_distance=0.5, speed=0.1, margin=0.04, narrow=0.75)
+    init, act = pc.bang_bang
+    cs, action = act(params, init(), _slot_state(True, -1.0, 1.2))
+    assert int(cs.mode) == pc.APPROACH and action.tolist() == [-1.0, 0.0]
+    cs, action = act(params, cs, _slot_state(True, 1.0, 0.45))
+    assert int(cs.mode) == pc.FINAL and action.tolist() == [0.0, 0.75]
+    blind = 1
+    while int(cs.mode) == pc.FINAL:
+        cs, action = act(params, cs, _slot_state(True, 1.0, 0.3))
+        assert action.tolist() == [0.0, 0.75]
+        blind += int(cs.mode) == pc.FINAL
+    assert int(cs.mode) == pc.INSIDE
+    assert abs(blind - (0.5 / 0.1 + 0.04) / pc.DT) <= 1  # steps in FINAL: 252, give or take float32's countdown

@@ -36,8 +36,14 @@ which under ``vmap`` pays for Alg. 2 every step.
 
 Spaces and records:
 
-* ``action`` ``(2,)`` in [-1, 1]: ``action[0]`` the steering (``action[1]``
-  is accepted and ignored: the paper's snake keeps its head compensation).
+* ``action`` ``(2,)`` in [-1, 1]: ``action[0]`` the steering; ``action[1]``
+  narrows the gait, its lateral amplitude ``A_o`` of Eq. (1) scaled by
+  ``1 - max(action[1], 0) (1 - narrow)`` (``narrow``, `PipeEnvParams`:
+  the factor at ``action[1] = 1``). The head compensation is kept, as the
+  paper's snake keeps it. The bang-bang controller can narrow the gait for
+  its blind last stretch into a lying pipe's bore (``narrow`` of
+  `robots.snake.pipe_controller.ControllerParams`, off by default), where
+  the head swings about +-0.15-0.2 m across the path with the full gait.
 * ``obs`` ``(32,)``: the 16 joint angles and the 16 joint velocities (the
   encoders); nothing of the world. The controllers read the detector's
   output from ``info``.
@@ -93,6 +99,7 @@ __all__ = [
     "PipeEnv",
     "PipeEnvParams",
     "default_tracker",
+    "gait_targets",
     "rollout",
     "rollout_slots",
     "rollout_start",
@@ -127,10 +134,12 @@ class PipeEnvParams(NamedTuple):
     Attributes:
         max_steer: ``C_o`` at full action, rad.
         event_threshold: frame-difference threshold on grey levels in (0, 1].
+        narrow: the gait's lateral amplitude factor at ``action[1] = 1``, in (0, 1].
     """
 
     max_steer: jax.Array
     event_threshold: jax.Array
+    narrow: jax.Array
 
 
 def default_tracker(circle: bool = False, sub_slots: int = 5) -> stream.Tracker:
@@ -154,6 +163,19 @@ def default_tracker(circle: bool = False, sub_slots: int = 5) -> stream.Tracker:
     grid = hough.CircleGrid(n_r=32, r_min=4.0, r_step=2.0) if circle else None
     det = detect.Detector(line=hough.LineGrid(), circle=grid, mode="sync", sub_slots=sub_slots)
     return stream.Tracker(det, window=SWING.window, target="any" if circle else "body", circle_per_slot=circle)
+
+
+def gait_targets(gait: GaitParams, params: PipeEnvParams, t, action, compensate: bool = True) -> jax.Array:
+    """The joints' targets for an action: Eq. (1) of the snake R-STDP paper steered by ``action[0]``, narrowed by ``action[1]``.
+
+    ``C_o = action[0] * max_steer``; the lateral amplitude ``A_o`` times
+    ``1 - max(action[1], 0) (1 - narrow)``; head-compensated when
+    ``compensate`` (`robots.snake.gait.joint_targets`). ``action`` is taken
+    as given (`PipeEnv.step` clips it to [-1, 1]).
+    """
+    amplitude = 1.0 - jnp.maximum(action[1], 0.0) * (1.0 - params.narrow)
+    gait = gait._replace(A_o=gait.A_o * amplitude)
+    return joint_targets(gait, t, action[0] * params.max_steer, 0.0, compensate)
 
 
 class PipeEnv(Env):
@@ -189,6 +211,9 @@ class PipeEnv(Env):
             and step (the rest are counted in ``overflow``).
         compensate: the gait's head compensation.
         gait: the gait's parameters.
+        narrow: the factor on the gait's lateral amplitude at ``action[1] =
+            1``, in (0, 1] (`robots.snake.pipe_controller`'s ``narrow``
+            uses it in the blind last stretch; 0.3 barely moves the snake).
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
@@ -210,6 +235,7 @@ class PipeEnv(Env):
         dvs: str = "frame",
         dvs_params: dvs.DVSParams | None = None,
         max_per_pixel: int = 4,
+        narrow: float = 0.5,
         **physics_kwargs: Any,
     ):
         if situation not in pipes.SITUATIONS:
@@ -222,6 +248,8 @@ class PipeEnv(Env):
             raise UserError(f"event_threshold must be in (0, 1], got {event_threshold}")
         if not max_steer > 0:
             raise UserError(f"max_steer must be positive, got {max_steer}")
+        if not 0 < narrow <= 1:
+            raise UserError(f"narrow must be in (0, 1], got {narrow}")
         if dvs not in DVS_MODELS:
             raise UserError(f"dvs must be one of {', '.join(DVS_MODELS)}, not {dvs!r}")
         if isinstance(max_per_pixel, bool) or not isinstance(max_per_pixel, int) or max_per_pixel < 1:
@@ -250,7 +278,7 @@ class PipeEnv(Env):
         self.tracker_params = tracker_params
         self.max_steps = max_steps
         self.event_capacity = int(event_capacity)
-        self.params = PipeEnvParams(jnp.float32(max_steer), jnp.float32(event_threshold))
+        self.params = PipeEnvParams(jnp.float32(max_steer), jnp.float32(event_threshold), jnp.float32(narrow))
         self.compensate = bool(compensate)
         self.gait = gait_params() if gait is None else gait
         self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
@@ -348,7 +376,7 @@ class PipeEnv(Env):
         info = dict(state.info)
         params, scene = info["params"], info["scene"]
         phys = state.pipeline_state
-        ctrl = joint_targets(self.gait, phys.time, action[0] * params.max_steer, 0.0, self.compensate)
+        ctrl = gait_targets(self.gait, params, phys.time, action, self.compensate)
         phys = self.physics.step(phys, ctrl)
         frame = self._frame(phys, scene)
         if self.dvs == "contrast":
