@@ -232,12 +232,28 @@ def test_action_1_narrows_the_gaits_lateral_amplitude_only():
         pipe_env.PipeEnv(narrow=0.0)
 
 
-def _slot_state(seen: bool, control: float, d_est: float):
+def _slot_state(seen: bool, control: float, d_est: float, offset: float | None = None):
+    """What `pc.bang_bang` reads of the env's state after a slot's end: a body detection (or none), Alg. 3's estimates."""
     valid = jnp.asarray(seen)
     slot = SimpleNamespace(
         body=SimpleNamespace(valid=valid), entry=SimpleNamespace(valid=jnp.asarray(False)), control=jnp.float32(control)
     )
-    return SimpleNamespace(info={"slot": slot, "ended": jnp.asarray(True), "d_est": jnp.float32(d_est)})
+    offset = 0.1 * control if offset is None else offset
+    info = {"slot": slot, "ended": jnp.asarray(True), "d_est": jnp.float32(d_est), "offset_est": jnp.float32(offset)}
+    return SimpleNamespace(info=info)
+
+
+def test_the_lead_aims_past_the_centre_on_the_side_first_seen():
+    """``C = sign(offset + lead * side)`` with ``side`` the sign of the first detection's offset, kept after it;
+    ``lead = 0`` follows the detector's C."""
+    init, act = pc.bang_bang
+    params = pc.ControllerParams(lead=0.25)
+    cs = init()
+    for offset, c in ((-0.6, -1.0), (0.1, -1.0), (0.2, -1.0), (0.3, 1.0), (-0.2, -1.0)):
+        cs, action = act(params, cs, _slot_state(True, np.sign(offset), 3.0, offset))
+        assert float(action[0]) == c and float(cs.side) == -1.0
+    cs, action = act(pc.ControllerParams(), init(), _slot_state(True, 1.0, 3.0, -0.5))
+    assert float(action[0]) == 1.0  # the detector's C, whatever the offset says
 
 
 def test_the_blind_stretch_goes_straight_narrowed_for_its_dead_reckoned_time():
