@@ -113,6 +113,10 @@ def test_bad_arguments_are_one_line_errors():
         pipe_env.PipeEnv(max_steps=0)
     with pytest.raises(UserError, match="event_threshold"):
         pipe_env.PipeEnv(event_threshold=2.0)
+    from robots.snake import reproduce_pipe as rp
+
+    with pytest.raises(UserError, match="--lead"):
+        rp.run(None, 1, 1.0, lead=-0.5)
 
 
 def test_failure_labels_take_the_first_cause_that_applies():

@@ -365,8 +365,14 @@ def run(
     baselines: int = 64,
     situations: list[str] | None = None,
     devices: int = 1,
+    lead: float | None = None,
 ) -> list[list]:
-    """Everything in the module docstring; each batch split over the first ``devices`` CPU devices."""
+    """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
+
+    ``lead``: m, how far the approach to a lying entry aims past its centre
+    (`robots.snake.pipe_controller.ControllerParams`; default that of
+    `robots.snake.pipe_controller.machine_params`, 0 the paper's ``C = sign(offset)``).
+    """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
 
@@ -376,6 +382,8 @@ def run(
         raise UserError(f"--seconds must be positive, got {seconds}")
     if baselines < 0:
         raise UserError(f"--baselines must be >= 0, got {baselines}")
+    if lead is not None and not 0 <= lead < 2:
+        raise UserError(f"--lead must be in [0, 2) m, got {lead}")
     rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
@@ -418,6 +426,8 @@ def run(
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
         machine = pc.machine_params(lying)
+        if lying and lead is not None:
+            machine = machine._replace(lead=lead)
         for controller, res, sub in _conditions(name, env, scenes, keys, slots, machine, baselines, progress, devices):
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, int(machine.lost_slots)))
             if controller == "bang-bang":
@@ -449,6 +459,14 @@ def _add_arguments(parser) -> None:
         "(default 64)",
     )
     parser.add_argument(
+        "--lead",
+        type=float,
+        default=None,
+        metavar="M",
+        help="m the approach to a lying pipe aims past its entry's centre, on the side first seen (default 0.25; "
+        "0 gives the paper's C = sign(offset))",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -475,6 +493,7 @@ def reproduce_command_run(
     compare_modes: int = 0,
     cpu_devices: int | None = None,
     no_progress: bool = False,
+    lead: float | None = None,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -490,6 +509,7 @@ def reproduce_command_run(
             baselines=baselines,
             situations=situations,
             devices=devices,
+            lead=lead,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
