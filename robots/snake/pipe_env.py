@@ -39,8 +39,9 @@ Spaces and records:
 * ``action`` ``(2,)`` in [-1, 1]: ``action[0]`` the steering; ``action[1]``
   narrows the gait, its lateral amplitude ``A_o`` of Eq. (1) of the snake
   R-STDP paper scaled by ``1 - max(action[1], 0) (1 - narrow)``
-  (``narrow``, `PipeEnvParams`: the factor at ``action[1] = 1``). The head compensation is kept, as the
-  paper's snake keeps it. The bang-bang controller can narrow the gait for
+  (``narrow``, `PipeEnvParams`: the factor at ``action[1] = 1``). The head
+  compensation is kept, as the paper's snake keeps it. The bang-bang
+  controller can narrow the gait for
   its blind last stretch into a lying pipe's bore (``narrow`` of
   `robots.snake.pipe_controller.ControllerParams`, off by default), where
   the head swings about +-0.15-0.2 m across the path with the full gait.
