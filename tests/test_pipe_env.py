@@ -86,6 +86,32 @@ def test_the_same_episode_anywhere_in_a_batch_is_the_same_trial(batch):
     jax.tree.map(same, final.metrics)
 
 
+def test_without_vision_the_same_physics_runs_and_nothing_is_detected(batch):
+    """``PipeEnv(vision=False)``, the baselines' env, steps the same snakes as the full env, step for step:
+    the going-straight episodes of the batch again (the same batch of nine), with no camera or detector."""
+    blind = pipe_env.PipeEnv(vision=False)
+    n = len(PLACEMENTS)
+    scenes = jax.tree.map(lambda *a: jnp.stack(a), *[_scene(*p) for p in PLACEMENTS] * 2, _scene(*PLACEMENTS[0]))
+    which = jnp.array([pc.CONTROLLERS["bang-bang"]] * n + [pc.CONTROLLERS["straight"]] * n + [0])
+    keys = jnp.stack([jax.random.key(7)] * (2 * n + 1))
+
+    def episode(key, scene, w):
+        return pipe_env.rollout(blind, pc.switch, pc.SwitchParams(pc.ControllerParams(), w), key, SLOTS, scene)
+
+    record, final = jax.jit(jax.vmap(episode))(keys, scenes, which)
+    seen, _ = batch
+    straight = slice(n, 2 * n)
+    np.testing.assert_array_equal(np.asarray(record["head"][straight]), np.asarray(seen["head"][straight]))
+    for name in ("depth", "lateral", "success", "reached"):
+        np.testing.assert_array_equal(
+            np.asarray(record["metrics"][name][straight]), np.asarray(seen["metrics"][name][straight]), err_msg=name
+        )
+    assert not np.asarray(record["metrics"]["detected"]).any()
+    assert np.all(np.asarray(record["action"]) == 0)  # the spiking controller, blind, never steers
+    ends = np.asarray(final.info["control_steps"]) == SLOTS * blind.slot_steps
+    assert ends.all()
+
+
 @pytest.mark.slow  # 14 s: two more compiles (the fast budget is spent above)
 def test_an_episode_alone_steers_as_in_a_batch(env):
     """Alone and in a batch of two, the first 4 slots make the same detections and actions; the C physics

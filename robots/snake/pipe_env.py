@@ -215,6 +215,10 @@ class PipeEnv(Env):
         narrow: the factor on the gait's lateral amplitude at ``action[1] =
             1``, in (0, 1] (`robots.snake.pipe_controller`'s ``narrow``
             uses it in the blind last stretch; 0.3 barely moves the snake).
+        vision: ``False`` runs no camera, DVS or detector in `step` (the
+            slots still end every ``slot_steps`` steps, with no detections):
+            for controllers that read only the truth, such as the
+            reproduction's baselines, at the cost of the physics alone.
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
@@ -237,6 +241,7 @@ class PipeEnv(Env):
         dvs_params: dvs.DVSParams | None = None,
         max_per_pixel: int = 4,
         narrow: float = 0.5,
+        vision: bool = True,
         **physics_kwargs: Any,
     ):
         if situation not in pipes.SITUATIONS:
@@ -256,6 +261,7 @@ class PipeEnv(Env):
         if isinstance(max_per_pixel, bool) or not isinstance(max_per_pixel, int) or max_per_pixel < 1:
             raise UserError(f"max_per_pixel must be a whole number >= 1, got {max_per_pixel!r}")
         self.dvs = dvs
+        self.vision = bool(vision)
         self.dvs_params = CONTRAST_DVS if dvs_params is None else dvs_params
         self.max_per_pixel = max_per_pixel
         self.scene = scene
@@ -379,6 +385,9 @@ class PipeEnv(Env):
         phys = state.pipeline_state
         ctrl = gait_targets(self.gait, params, phys.time, action, self.compensate)
         phys = self.physics.step(phys, ctrl)
+        if not self.vision:
+            return self._blind_step(state, info, phys, slot_end)
+        tr, tp = self.tracker, self.tracker_params
         frame = self._frame(phys, scene)
         if self.dvs == "contrast":
             key = jax.random.fold_in(info["dvs_key"], info["control_steps"] + 1)
@@ -391,7 +400,6 @@ class PipeEnv(Env):
                 info["frame"], frame, phys.time, threshold=params.event_threshold, capacity=self.event_capacity
             )
         angle, velocity = phys.qpos[self._joints[0]], phys.qvel[self._dofs[0]]
-        tr, tp = self.tracker, self.tracker_params
         tstate = stream.step(tr, tp, info["tracker"], events, phys.time, angle, velocity)
         if slot_end is None:
             ended = stream.due(tp, tstate)
@@ -409,6 +417,25 @@ class PipeEnv(Env):
         slot = jax.tree.map(lambda new, old: jnp.where(ended, new, old), out, info["slot"])
         slot = slot._replace(control=out.control)
         est = _steering_estimate(tr, out)
+        info.update(frame=frame, events=events, overflow=overflow, tracker=tstate, slot=slot, ended=ended)
+        info.update(
+            d_est=jnp.where(ended & est.valid, est.distance, info["d_est"]),
+            offset_est=jnp.where(ended & est.valid, est.offset, info["offset_est"]),
+        )
+        return self._outcome(state, info, phys)
+
+    def _blind_step(self, state: State, info: dict, phys, slot_end) -> State:
+        """`step` with ``vision=False``: the physics and the outcomes; the slots end on time, with no detections."""
+        if slot_end is None:
+            ended = (info["control_steps"] + 1) % self.tracker_params.slot_steps == 0
+        else:
+            ended = jnp.asarray(bool(slot_end))
+        info.update(overflow=jnp.zeros((), jnp.int32), ended=ended)
+        return self._outcome(state, info, phys)
+
+    def _outcome(self, state: State, info: dict, phys) -> State:
+        """The step's truth, outcomes and `State` from the stepped physics and the detector's ``info``."""
+        scene = info["scene"]
         n = info["control_steps"] + 1
         reached = pipes.reached(phys.head_pos, scene)[0]
         entered = pipes.entered(phys.head_pos, phys.head_mat, scene)[0]
@@ -418,12 +445,6 @@ class PipeEnv(Env):
         success = info["success"] | success_now
         distance = self._distance(phys, scene)
         info.update(
-            frame=frame,
-            events=events,
-            overflow=overflow,
-            tracker=tstate,
-            slot=slot,
-            ended=ended,
             com_ring=info["com_ring"].at[info["control_steps"] % (2 * self.window)].set(phys.com_pos[:2]),
             control_steps=n,
             reached=info["reached"] | reached,
@@ -431,8 +452,6 @@ class PipeEnv(Env):
             collided=info["collided"] | collided,
             success=success,
             success_step=jnp.where(success_now & ~info["success"], n, info["success_step"]),
-            d_est=jnp.where(ended & est.valid, est.distance, info["d_est"]),
-            offset_est=jnp.where(ended & est.valid, est.offset, info["offset_est"]),
             distance=distance,
         )
         done = success | (collided & ~lying) | (n >= self.max_steps)
