@@ -8,8 +8,8 @@ only, which a scene file's fixed placement does not use: they repeat the
 same trial, a check of determinism more than a sample). Each episode is
 `robots.snake.pipe_env.PipeEnv` driven by the spiking bang-bang controller
 (`robots.snake.pipe_controller.bang_bang`) for ``--seconds``; standing pipes
-with the line grid, lying ones with the line and the reduced circle grid
-(`robots.snake.pipe_env.default_tracker`). The first ``--baselines``
+with the line grid, lying ones with the reduced circle grid alone, as the
+paper detects them (`robots.snake.pipe_env.default_tracker`). The first ``--baselines``
 episodes of each situation run again, the same placements and keys, going
 straight and with the privileged controller (the true side of the pipe):
 the lower and upper bounds of the bang-bang law. They read only the truth,
@@ -437,11 +437,11 @@ def run(
     for name, lying, where, scenes in jobs:
         key = tuple(sorted((k, id(v)) for k, v in where.items()))
         if key not in envs:
-            env = pipe_env.PipeEnv(**where, tracker=pipe_env.default_tracker(circle=lying))
+            env = pipe_env.PipeEnv(**where, tracker=pipe_env.default_tracker(circle=lying, line=not lying))
             envs[key] = tuple(
                 pipe_env.PipeEnv(
                     **where,
-                    tracker=pipe_env.default_tracker(circle=lying),
+                    tracker=pipe_env.default_tracker(circle=lying, line=not lying),
                     max_steps=steps_for(env) * env.slot_steps,
                     vision=vision,
                 )
