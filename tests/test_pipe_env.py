@@ -139,6 +139,10 @@ def test_bad_arguments_are_one_line_errors():
         pipe_env.PipeEnv(max_steps=0)
     with pytest.raises(UserError, match="event_threshold"):
         pipe_env.PipeEnv(event_threshold=2.0)
+    with pytest.raises(UserError, match="line grid, the circle grid"):
+        pipe_env.default_tracker(circle=False, line=False)
+    entry_only = pipe_env.default_tracker(circle=True, line=False)  # the lying pipes' detector: the entry steers
+    assert entry_only.detector.line is None and entry_only.target == "entry"
     from robots.snake import reproduce_pipe as rp
 
     with pytest.raises(UserError, match="--lead"):
