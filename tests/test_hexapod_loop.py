@@ -139,6 +139,23 @@ def test_controllers_are_pure_pairs():
     assert int(again) == draws[0]  # keyed: the same key gives the same gaits
 
 
+def test_the_oracle_in_view_turns_on_the_truth_only_while_the_prey_is_in_the_cameras_view():
+    init, act = controllers.oracle_in_view
+    half = math.radians(0.5 * cam.HFOV_DEG)
+
+    def state(bearing, truth):
+        return SimpleNamespace(info={"bearing": jnp.float32(bearing), "truth_gait": jnp.int32(truth)})
+
+    gait = init(jax.random.key(0))
+    assert int(gait) == 0  # starts forward, as the SNN does
+    gait, a = act(gait, state(0.9 * half, 2))  # in view, near on the right: turn right
+    assert int(a) == 2
+    gait, a = act(gait, state(1.1 * half, 1))  # out of view: the right turn is held, whatever the truth
+    assert int(a) == 2
+    gait, a = act(gait, state(-0.5 * half, 0))  # back in view and far: forward
+    assert int(a) == 0
+
+
 def test_summary_arithmetic_on_hand_made_episodes():
     # Four episodes of two prey: captured slot 0 at step 3; slot 1 at 2 then slot 0 at 5; none; slot 1 at 4.
     res = {

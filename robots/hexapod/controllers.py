@@ -17,19 +17,27 @@ batches them with the env.
   (not in ``CONTROLLERS``: a variant, measured in ``docs/BENCHMARKS.md``).
 * `oracle`: `robots.hexapod.prey.truth_gait` from the camera's true pose
   (``info["truth_gait"]``): the rule the SNN approximates, fed the truth; the
-  upper bound of this task's rule.
+  upper bound of this task's rule. It turns toward a prey at any bearing,
+  seen or not.
+* `oracle_in_view`: the same rule while the nearest prey is within the head
+  camera's horizontal field of view (`robots.hexapod.camera.HFOV_DEG`), the
+  gait held while it is not (as the SNN keeps its gait in silence): the
+  best the rule can do with what this camera sees.
 * `random`: a gait drawn uniformly at each decision from the controller's own
   key: the lower bound.
 """
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 
+from robots.hexapod.camera import HFOV_DEG
 from robots.hexapod.gaits import N_GAITS
 
-__all__ = ["CONTROLLERS", "snn", "snn_ordered", "oracle", "random"]
+__all__ = ["CONTROLLERS", "snn", "snn_ordered", "oracle", "oracle_in_view", "random"]
 
 
 def _keep_key(key):
@@ -48,6 +56,16 @@ def _oracle_act(cstate, state):
     return cstate, state.info["truth_gait"].astype(jnp.int32)
 
 
+def _forward(key):
+    return jnp.zeros((), jnp.int32)
+
+
+def _oracle_in_view_act(gait, state):
+    seen = jnp.abs(state.info["bearing"]) <= math.radians(0.5 * HFOV_DEG)
+    gait = jnp.where(seen, state.info["truth_gait"], gait).astype(jnp.int32)
+    return gait, gait
+
+
 def _random_act(cstate, state):
     key, sub = jax.random.split(cstate)
     return key, jax.random.randint(sub, (), 0, N_GAITS, dtype=jnp.int32)
@@ -62,7 +80,10 @@ snn_ordered = (_keep_key, _snn_ordered_act)
 oracle = (_keep_key, _oracle_act)
 """The ground-truth rule from the true pose (upper bound)."""
 
+oracle_in_view = (_forward, _oracle_in_view_act)
+"""The ground-truth rule while the nearest prey is in the camera's horizontal view, else the gait held."""
+
 random = (_keep_key, _random_act)
 """A uniformly random gait at each decision, keyed (lower bound)."""
 
-CONTROLLERS = {"snn": snn, "oracle": oracle, "random": random}
+CONTROLLERS = {"snn": snn, "oracle": oracle, "oracle_in_view": oracle_in_view, "random": random}
