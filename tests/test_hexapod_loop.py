@@ -139,21 +139,27 @@ def test_controllers_are_pure_pairs():
     assert int(again) == draws[0]  # keyed: the same key gives the same gaits
 
 
-def test_the_oracle_in_view_turns_on_the_truth_only_while_the_prey_is_in_the_cameras_view():
+def test_the_oracle_in_view_turns_by_depth_and_only_while_the_prey_is_in_the_cameras_view():
     init, act = controllers.oracle_in_view
     half = math.radians(0.5 * cam.HFOV_DEG)
+    size = 0.03
+    boundary = cam.D_NEAR + 0.5 * size  # near: depth along the camera's axis within this
 
-    def state(bearing, truth):
-        return SimpleNamespace(info={"bearing": jnp.float32(bearing), "truth_gait": jnp.int32(truth)})
+    def state(bearing, distance):
+        scene = SimpleNamespace(size=jnp.full((4,), size, jnp.float32))
+        return SimpleNamespace(info={"bearing": jnp.float32(bearing), "distance": jnp.float32(distance), "scene": scene})
 
     gait = init(jax.random.key(0))
     assert int(gait) == 0  # starts forward, as the SNN does
-    gait, a = act(gait, state(0.9 * half, 2))  # in view, near on the right: turn right
+    b = -0.9 * half  # in view, on the right
+    gait, a = act(gait, state(b, 0.99 * boundary / math.cos(b)))  # depth just inside: near, turn right
     assert int(a) == 2
-    gait, a = act(gait, state(1.1 * half, 1))  # out of view: the right turn is held, whatever the truth
-    assert int(a) == 2
-    gait, a = act(gait, state(-0.5 * half, 0))  # back in view and far: forward
+    gait, a = act(gait, state(b, 1.01 * boundary / math.cos(b)))  # depth just beyond (distance 1.4x): forward
     assert int(a) == 0
+    gait, a = act(gait, state(0.5 * half, 0.5))  # near on the left
+    assert int(a) == 1
+    gait, a = act(gait, state(1.1 * half, 5.0))  # out of view: the left turn is held, far or not
+    assert int(a) == 1
 
 
 def test_summary_arithmetic_on_hand_made_episodes():

@@ -19,10 +19,13 @@ batches them with the env.
   (``info["truth_gait"]``): the rule the SNN approximates, fed the truth; the
   upper bound of this task's rule. It turns toward a prey at any bearing,
   seen or not.
-* `oracle_in_view`: the same rule while the nearest prey is within the head
-  camera's horizontal field of view (`robots.hexapod.camera.HFOV_DEG`), the
-  gait held while it is not (as the SNN keeps its gait in silence): the
-  best the rule can do with what this camera sees.
+* `oracle_in_view`: the rule as the camera's windows apply it, on the truth:
+  "near" when the nearest prey's depth along the camera's axis (its row in
+  the image, for a level camera) is within ``D_NEAR`` plus half its size,
+  a turn toward its side then, else forward; while the prey is outside the
+  camera's horizontal field of view (`robots.hexapod.camera.HFOV_DEG`) the
+  gait is held, as the SNN keeps its gait in silence. What the paper's rule
+  can do with what this camera sees.
 * `random`: a gait drawn uniformly at each decision from the controller's own
   key: the lower bound.
 """
@@ -34,8 +37,9 @@ import math
 import jax
 import jax.numpy as jnp
 
-from robots.hexapod.camera import HFOV_DEG
+from robots.hexapod.camera import D_NEAR, HFOV_DEG
 from robots.hexapod.gaits import N_GAITS
+from robots.hexapod.vision import FORWARD, LEFT, RIGHT
 
 __all__ = ["CONTROLLERS", "snn", "snn_ordered", "oracle", "oracle_in_view", "random"]
 
@@ -61,8 +65,12 @@ def _forward(key):
 
 
 def _oracle_in_view_act(gait, state):
-    seen = jnp.abs(state.info["bearing"]) <= math.radians(0.5 * HFOV_DEG)
-    gait = jnp.where(seen, state.info["truth_gait"], gait).astype(jnp.int32)
+    info = state.info
+    bearing = info["bearing"]
+    near = info["distance"] * jnp.cos(bearing) <= D_NEAR + 0.5 * info["scene"].size[0]
+    rule = jnp.where(near, jnp.where(bearing > 0, LEFT, RIGHT), FORWARD)
+    seen = jnp.abs(bearing) <= math.radians(0.5 * HFOV_DEG)
+    gait = jnp.where(seen, rule, gait).astype(jnp.int32)
     return gait, gait
 
 
@@ -81,7 +89,7 @@ oracle = (_keep_key, _oracle_act)
 """The ground-truth rule from the true pose (upper bound)."""
 
 oracle_in_view = (_forward, _oracle_in_view_act)
-"""The ground-truth rule while the nearest prey is in the camera's horizontal view, else the gait held."""
+"""The windows' rule on the truth (near by depth) while the nearest prey is in the camera's view, else the gait held."""
 
 random = (_keep_key, _random_act)
 """A uniformly random gait at each decision, keyed (lower bound)."""
