@@ -147,7 +147,9 @@ def test_the_oracle_in_view_turns_by_depth_and_only_while_the_prey_is_in_the_cam
 
     def state(bearing, distance):
         scene = SimpleNamespace(size=jnp.full((4,), size, jnp.float32))
-        return SimpleNamespace(info={"bearing": jnp.float32(bearing), "distance": jnp.float32(distance), "scene": scene})
+        return SimpleNamespace(
+            info={"bearing": jnp.float32(bearing), "distance": jnp.float32(distance), "scene": scene}
+        )
 
     gait = init(jax.random.key(0))
     assert int(gait) == 0  # starts forward, as the SNN does

@@ -371,7 +371,9 @@ def _conditions(name, envs, scenes, keys, slots, machine, baselines: int, progre
         if controller != "bang-bang":
             size = min(CHUNK, keys.shape[0])
         run_in = env if controller == "bang-bang" else blind
-        res = _episodes(run_in, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size, devices)
+        res = _episodes(
+            run_in, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size, devices
+        )
         out.append((controller, res, sub))
     return out
 
@@ -454,7 +456,9 @@ def run(
         machine = pc.machine_params(lying)
         if lying and lead is not None:
             machine = machine._replace(lead=lead)
-        for controller, res, sub in _conditions(name, envs[key], scenes, keys, slots, machine, baselines, progress, devices):
+        for controller, res, sub in _conditions(
+            name, envs[key], scenes, keys, slots, machine, baselines, progress, devices
+        ):
             vision = controller == "bang-bang"
             lost = int(machine.lost_slots)
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, lost, vision))
