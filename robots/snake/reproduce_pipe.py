@@ -265,10 +265,8 @@ def summarize(name, controller, res, lying: bool, dt: float, slot_steps: int, lo
     agree = np.where(steer, np.sign(res["action"]) == np.sign(res["offset_true"]), False).sum(1)
     sign_right = np.where(steer.any(1), agree / np.maximum(steer.sum(1), 1), 1.0)  # never steered: not "wrong side"
     last = np.array([np.flatnonzero(d[:e])[-1] if d[:e].any() else -1 for d, e in zip(det, end)])
-    last_seen_slots = np.where(last >= 0, (end - 1 - last) // slot_steps, 10**9)
+    last_seen_slots = np.where(last >= 0, (end - 1 - last) // slot_steps, 10**9) if vision else np.zeros(n, int)
     depth_end = res["depth"][np.arange(n), end - 1]
-    if not vision:
-        last_seen_slots = np.zeros(n, int)
     labels = label_failures(
         res["success"],
         res["reached"],
@@ -367,10 +365,9 @@ def _conditions(name, envs, scenes, keys, slots, machine, baselines: int, progre
             continue
         sub = jax.tree.map(lambda a: a[:n], scenes)
         params = _switch_params(machine, controller, n)
-        size = min(CIRCLE_CHUNK if env.tracker.detector.circle is not None else CHUNK, keys.shape[0])
-        if controller != "bang-bang":
-            size = min(CHUNK, keys.shape[0])
         run_in = env if controller == "bang-bang" else blind
+        circle = run_in.vision and run_in.tracker.detector.circle is not None
+        size = min(CIRCLE_CHUNK if circle else CHUNK, keys.shape[0])
         res = _episodes(
             run_in, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size, devices
         )
