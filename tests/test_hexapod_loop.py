@@ -32,8 +32,11 @@ def _scene(xy):
     return prey_mod.PreyScene(jnp.zeros(3), jnp.asarray(full), jnp.full((prey_mod.MAX_PREY,), 0.1), jnp.asarray(alive))
 
 
+@pytest.mark.slow
 def test_mjx_backend_walks_the_loop_as_the_c_engine():
     """Three robots of the pool, six decisions of mixed gaits: the torso on MJX within 3 mm and 0.5 deg of MuJoCo C.
+
+    Slow (~30 s, MJX compiles on a CPU): the suite keeps `test_hexapod_walk`'s MJX-against-C walk.
 
     Both start every decision from the same float32 state; contacts amplify
     the engines' rounding (0.3 mm measured at the sixth decision).

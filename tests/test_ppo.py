@@ -142,9 +142,9 @@ def test_train_ppo_saves_a_policy_that_evaluate_reads_and_a_finished_run_is_kept
         load_policy(out)
 
 
-@pytest.mark.parametrize("backend", ["mujoco", "mjx"])
+@pytest.mark.parametrize("backend", ["mujoco", pytest.param("mjx", marks=pytest.mark.slow)])
 def test_brax_ppo_trains_a_few_iterations_on_either_backend(backend):
-    """Brax's jitted, vmapped training step on the env: MuJoCo C through its callback, or MJX (~45 s on a CPU)."""
+    """Brax's jitted, vmapped training step on the env: MuJoCo C through its callback, or MJX (~35 s on a CPU: slow)."""
     task = ppo.make_task("snake-track", "angles", backend=backend)
     settings = ppo.PPOSettings(
         num_envs=4, batch_size=4, num_minibatches=2, unroll_length=5, num_updates_per_batch=1, episode_length=50
