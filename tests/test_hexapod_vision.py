@@ -62,9 +62,12 @@ def test_an_edge_band_in_a_region_makes_its_gait_win(rows, cols, gait):
 
 
 def test_a_near_object_outvotes_a_far_one_at_equal_evidence():
-    """Window spikes arriving one at a time: 0.7 fires a turn every 2, 0.4 fires G1 every 3, so the near side wins."""
+    """Window spikes arriving one at a time: 0.7 fires a turn every 2, 0.4 fires G1 every 3, so the near side wins.
+
+    The paper's wiring: the near windows' veto on G1 is the next test.
+    """
     config = vision.scaled_config(160, 240, 20)
-    params = vision.vision_params(config, tau_out=10.0)
+    params = vision.vision_params(config, "paper", tau_out=10.0)
     region = vision.regions(config)
     far = np.argwhere(region == vision.FORWARD)[:6]
     near = np.argwhere(region == vision.RIGHT)[:6]
@@ -88,11 +91,38 @@ def test_a_near_object_outvotes_a_far_one_at_equal_evidence():
     assert int(edges.winner(jnp.asarray(fired), jnp.int32(vision.FORWARD))) == vision.RIGHT
 
 
+def test_one_near_window_spike_holds_g1_back_for_eleven_far_ones():
+    """The "near-veto" wiring: G1 at -3.2 from a near window, so after it G1 needs -3.2 + 0.4 k > 1, k = 11 far spikes."""
+    config = vision.scaled_config(160, 240, 20)
+    params = vision.vision_params(config, tau_out=1e6)  # no leak over the test
+    region = vision.regions(config)
+    far, near = np.argwhere(region == vision.FORWARD)[0], np.argwhere(region == vision.LEFT)[0]
+
+    def one(cell):
+        s = np.zeros((config.n_rows, config.n_cols, 2), bool)
+        s[cell[0], cell[1], 1] = True  # the horizontal branch, wired as the vertical one
+        return edges._readout_drive(params, jnp.asarray(s))
+
+    out = edges.init(config).out
+    out, spikes = edges._update(out, jnp.bool_(True), one(near), 0.0, params.tau_out, params.v_th)
+    assert np.asarray(spikes).tolist() == [False, False, False]
+    g1 = []
+    for k in range(12):
+        out, spikes = edges._update(out, jnp.bool_(True), one(far), 0.001 * (k + 1), params.tau_out, params.v_th)
+        g1.append(bool(spikes[vision.FORWARD]))
+    assert g1 == [False] * 10 + [True, False]
+    paper = np.asarray(vision.vision_params(config, "paper").readout)
+    assert np.all(paper[vision.FORWARD][region != vision.FORWARD] == 0)
+    np.testing.assert_array_equal(np.asarray(params.readout)[1:], paper[1:])  # the turns' synapses are the paper's
+
+
 def test_bad_maps_are_one_line_errors():
     with pytest.raises(UserError, match="2 x 2"):
         vision.regions(edges.EdgeConfig(height=20, width=40, window=20, n_out=3))
     with pytest.raises(UserError, match="3 gait"):
         vision.readout(edges.EdgeConfig(height=40, width=40, window=20, n_out=2))
+    with pytest.raises(UserError, match="unknown wiring 'nearest'; expected one of near-veto, paper"):
+        vision.vision_params(vision.scaled_config(160, 240, 20), "nearest")
 
 
 def test_the_network_counts_the_spikes_of_plain_numpy_loops():

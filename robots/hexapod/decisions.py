@@ -45,7 +45,7 @@ from robots.hexapod import physics
 from robots.hexapod import prey as prey_mod
 from robots.hexapod.gaits import PERIOD, required_spikes
 from robots.hexapod.legs import servo_targets, step_params
-from robots.hexapod.vision import FORWARD, vision_params
+from robots.hexapod.vision import FORWARD, WIRING, vision_params
 from spikejax.vision import dvs, edges
 
 __all__ = [
@@ -181,6 +181,7 @@ def decide(
     *,
     config: edges.EdgeConfig = cam.EDGE_CONFIG,
     lens: str = cam.LENS,
+    wiring: str = WIRING,
 ):
     """Render, emulate, filter and choose along one torso track ``(N_FRAMES, 6)``: a `Decision`.
 
@@ -189,9 +190,11 @@ def decide(
     `vision.PAPER_SENSOR` for the paper's 800 x 1280 pixels and 100-pixel
     windows with its own weights (ACCEPTANCE A11); the camera's pose, lens,
     DVS noise rate per pixel and the scene are the same. ``lens`` (static,
-    `camera.LENSES`): where the optical axis meets the sensor.
+    `camera.LENSES`): where the optical axis meets the sensor. ``wiring``
+    (static, `robots.hexapod.vision.WIRINGS`): the readout onto the gait
+    neurons; the ordered readout takes the excitatory synapses only.
     """
-    params = vision_params(config)
+    params = vision_params(config, wiring)
     cap = capacity(config)
     camera = cam.sensor_camera(config, lens)
     world = cam.prey_scene(scene)

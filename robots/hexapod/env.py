@@ -114,7 +114,7 @@ from robots.hexapod.gaits import N_GAITS, N_LEGS, PERIOD
 from robots.hexapod.legs import servo_targets, step_params
 from robots.hexapod.training import TrainParams, gait_correct, train
 from robots.hexapod.trial import GaitTrialParams
-from robots.hexapod.vision import FORWARD
+from robots.hexapod.vision import FORWARD, WIRING, check_wiring
 from spikejax.errors import UserError
 from spikejax.neurons import DiscreteLIFParams
 from spikejax.vision import edges
@@ -225,6 +225,8 @@ class HexapodEnv(Env):
         nthread: C threads (default: the cores).
         lens: where the head camera's optical axis meets its sensor
             (`robots.hexapod.camera.LENSES`; default centred on the windows).
+        wiring: the visual SNN's readout onto the gait neurons
+            (`robots.hexapod.vision.WIRINGS`; default with the near windows' veto on G1).
     """
 
     def __init__(
@@ -238,6 +240,7 @@ class HexapodEnv(Env):
         see: bool = True,
         nthread: int | None = None,
         lens: str = cam.LENS,
+        wiring: str = WIRING,
     ):
         if backend not in BACKENDS:
             raise UserError(f"unknown hexapod physics backend {backend!r}; expected one of {', '.join(BACKENDS)}")
@@ -249,6 +252,7 @@ class HexapodEnv(Env):
         self.see = bool(see)
         cam.sensor_camera(cam.EDGE_CONFIG, lens)  # raises UserError for an unknown lens
         self.lens = lens
+        self.wiring = check_wiring(wiring)
         self.step_params = step_params()
         self.weights = trained_network(network_seed)
         alpha, v_th = GaitTrialParams().alpha, GaitTrialParams().v_th
@@ -363,7 +367,7 @@ class HexapodEnv(Env):
         rng, k_see = jax.random.split(info["rng"])
         if self.see:
             track = jnp.concatenate([info["track"][None], frames], axis=0)
-            d = decisions.decide(track, scene, k_see, lens=self.lens)
+            d = decisions.decide(track, scene, k_see, lens=self.lens, wiring=self.wiring)
             counts = d.out_counts.astype(jnp.int32)
             ordered = d.ordered_counts.astype(jnp.int32)
             seen = {

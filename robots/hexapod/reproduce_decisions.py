@@ -7,7 +7,9 @@ rest and its own DVS noise (`robots.hexapod.decisions`). Beside them
 ``--empty M`` empty arenas (default 200; no prey, so the truth is G1: the
 robot keeps walking) and, with ``--full-check K``, the first ``K`` scenes again
 at the paper's 800 x 1280 sensor with its 100-pixel windows and own weights
-(ACCEPTANCE A11: the scaled network's agreement with the full one). Writes, in
+(ACCEPTANCE A11: the scaled network's agreement with the full one).
+``--wiring`` picks the readout onto the gait neurons: with the near windows'
+veto on G1 (the default) or the paper's alone (`robots.hexapod.vision`). Writes, in
 ``--out DIR``:
 
 - ``hexapod_decisions.csv``: accuracy (the winner-take-all's gait equal to
@@ -19,7 +21,7 @@ at the paper's 800 x 1280 sensor with its 100-pixel windows and own weights
   agreement, and each sensor's accuracy on those scenes); for both readouts:
   ``frame`` (`edges.sync_step`'s, at most one gait spike a frame) and
   ``ordered`` (the frame's layer-3 spikes reaching the gait neurons one by one,
-  `decisions.ordered_readout`);
+  `decisions.ordered_readout`, which takes the excitatory synapses only);
 - ``hexapod_confusion.csv``: the confusion matrices (truth by decision), both readouts;
 - ``hexapod_decisions.png``: the Fig. 7 counterpart for a near and a far scene:
   the step's DVS events, the filter's spikes, the layer-3 windows' spikes (the
@@ -42,7 +44,7 @@ from robots.hexapod import camera as cam
 from robots.hexapod import decisions, physics
 from robots.hexapod import prey as prey_mod
 from robots.hexapod.gaits import GAIT_NAMES
-from robots.hexapod.vision import FORWARD, PAPER_SENSOR, regions
+from robots.hexapod.vision import FORWARD, PAPER_SENSOR, WIRING, WIRINGS, check_wiring, regions
 from spikejax.commands import Command, count, count_or_zero, output_directory, positive_float
 from spikejax.stats import wilson_interval
 
@@ -145,12 +147,14 @@ def _plot(path: Path, examples) -> None:
     fig.savefig(path, dpi=110)
 
 
-def _decide_all(draws, index, n_prey, seed, size, config, chunk, bar, lens=cam.LENS) -> dict:
+def _decide_all(draws, index, n_prey, seed, size, config, chunk, bar, lens=cam.LENS, wiring=WIRING) -> dict:
     """Every scene's `decisions.Decision` fields and nearest distances, as NumPy arrays, ``chunk`` scenes a batch."""
     step = jax.jit(
         jax.vmap(
             lambda track, i, n: (
-                decisions.decide(track, scenes(seed, i, n, size), _keys(seed, i), config=config, lens=lens),
+                decisions.decide(
+                    track, scenes(seed, i, n, size), _keys(seed, i), config=config, lens=lens, wiring=wiring
+                ),
                 _nearest_from_camera(scenes(seed, i, n, size), track[0]),
             )
         )
@@ -183,9 +187,10 @@ def run(
     full_check: int = 0,
     prey_size: float = prey_mod.PREY_SIZE,
     lens: str = cam.LENS,
+    wiring: str = WIRING,
     no_progress: bool = False,
 ) -> int:
-    """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--empty M] [--full-check K] [--prey-size S] [--seed S]``.
+    """``spikejax reproduce hexapod-decisions --out DIR [--scenes N] [--empty M] [--full-check K] [--prey-size S] [--seed S] [--wiring W]``.
 
     Args:
         out: output directory.
@@ -197,20 +202,23 @@ def run(
             sensor (ACCEPTANCE A11): the agreement of the two decisions.
         prey_size: the cubes' edge, m (`prey.PREY_SIZE`; 0.1 gives the cubes as tall as the camera).
         lens: the camera's optical axis on the windows' centre or, as in the paper, the sensor's (`camera.LENSES`).
+        wiring: the readout onto the gait neurons, with the near windows' veto on G1 or the paper's
+            (`robots.hexapod.vision.WIRINGS`).
         no_progress: hide the progress bar.
     """
+    check_wiring(wiring)
     with output_directory(out, command="reproduce hexapod-decisions") as out:
         draws = physics.randomised(scenes_n + empty_n, seed=seed)
         index = np.arange(scenes_n + empty_n)
         n_prey = np.where(index < scenes_n, 1 + index % prey_mod.MAX_PREY, 0)
         total = scenes_n + empty_n + min(full_check, scenes_n)
         with tqdm(total=total, desc="hexapod decisions", unit="scene", disable=no_progress) as bar:
-            res = _decide_all(draws, index, n_prey, seed, prey_size, cam.EDGE_CONFIG, _CHUNK, bar, lens)
+            res = _decide_all(draws, index, n_prey, seed, prey_size, cam.EDGE_CONFIG, _CHUNK, bar, lens, wiring)
             full = None
             if full_check:
                 k = min(full_check, scenes_n)
                 full = _decide_all(
-                    draws[:k], index[:k], n_prey[:k], seed, prey_size, PAPER_SENSOR, _FULL_CHUNK, bar, lens
+                    draws[:k], index[:k], n_prey[:k], seed, prey_size, PAPER_SENSOR, _FULL_CHUNK, bar, lens, wiring
                 )
         prey_rows = index < scenes_n
         sub = {k: v[prey_rows] for k, v in res.items()}
@@ -244,7 +252,8 @@ def run(
                 track = jnp.asarray(decisions.g1_step_tracks([draws[i]])[0])
                 j = jnp.int32(i)
                 scene = scenes(seed, j, size=prey_size)
-                examples.append((title, *decisions.decide(track, scene, _keys(seed, j), with_spikes=True, lens=lens)))
+                d = decisions.decide(track, scene, _keys(seed, j), with_spikes=True, lens=lens, wiring=wiring)
+                examples.append((title, *d))
         if examples:
             _plot(out / "hexapod_decisions.png", examples)
         for r in rows:
@@ -311,6 +320,12 @@ def _add_arguments(parser) -> None:
         choices=cam.LENSES,
         default=cam.LENS,
         help="the camera's optical axis on the windows' centre (default) or, as in the paper, on the sensor's centre",
+    )
+    parser.add_argument(
+        "--wiring",
+        choices=WIRINGS,
+        default=WIRING,
+        help="the readout onto the gait neurons: with the near windows' veto on G1 (default) or the paper's alone",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
