@@ -73,7 +73,7 @@ def test_reset_and_step_shapes_and_a_batch_of_two_is_each_alone(blind_env):
     env = blind_env
     assert env.observation_size == 6 and env.action_size == 1 and env.backend == "mujoco"
     keys = jax.random.split(jax.random.key(3), 2)
-    scenes = jax.tree.map(lambda *a: jnp.stack(a), _scene([[1.0, 0.1]]), _scene([[1.5, -0.3], [2.0, 0.4]]))
+    scenes = jax.tree.map(lambda *a: jnp.stack(a), _scene([[2.5, 0.1]]), _scene([[2.5, -0.3], [3.0, 0.4]]))
     step, reset = jax.jit(jax.vmap(env.step)), jax.jit(jax.vmap(env.reset))
     batch = reset(keys, scenes)
     assert batch.obs.shape == (2, 6)
