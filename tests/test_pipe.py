@@ -115,6 +115,21 @@ def test_find_body_vmaps_like_a_loop():
 FOCAL = 0.5 * 128 / math.tan(math.radians(30.0))  # 60 degree field of view
 
 
+@pytest.mark.parametrize("values", ["distinct", "ties", "zeros"])
+@pytest.mark.parametrize("n", [pp.TOP_K_BLOCK * 64, 32 * 128 * 128, 32 * 128 * 128 + 77])
+def test_top_k_by_blocks_is_lax_top_k_ties_included(values, n):
+    rng = np.random.default_rng(n)
+    x = {
+        "distinct": rng.random(n),
+        "ties": rng.integers(0, 2, n) + rng.integers(0, 3, n) / 8,  # circle counts with tie fractions
+        "zeros": np.zeros(n),
+    }[values].astype(np.float32)
+    x[[5, n - 1]] = x.max()  # the largest value at both ends, across blocks
+    got, want = jax.jit(pp.top_k, static_argnums=1)(jnp.asarray(x), 16), jax.lax.top_k(jnp.asarray(x), 16)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+
+
 def test_eq8_distance_from_known_size():
     assert float(pp.distance_from_size(20.0, FOCAL, 0.2)) == pytest.approx(FOCAL * 0.2 / 20.0)
 

