@@ -117,3 +117,10 @@ def test_bench_splits_the_streams_over_two_cpu_devices(tmp_path):
     # Every peer also on both cores, one process each: the all-cores ratios are against these.
     pooled = {r["implementation"] for r in rows if r["parallel"] == "2 processes"}
     assert pooled == {f"{name}, 2 processes" for _, name, _ in bench_hough.PEERS}
+
+
+def test_a_process_row_counts_the_work_of_every_process():
+    one = dict(implementation="spikejax LineGrid", batch=32, frames=256, events=569_856.0, cores=1, devices=1)
+    row = bench_hough._process_row(one, 2, 64)
+    assert row["implementation"] == "spikejax LineGrid, 2 processes" and row["parallel"] == "2 processes"
+    assert (row["batch"], row["frames"], row["events"], row["cores"], row["devices"]) == (64, 512, 1_139_712.0, 2, 1)

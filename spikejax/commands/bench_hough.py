@@ -27,8 +27,11 @@ against all: the peers run one frame after another in one process, and, with
 several cores, in a pool of one process a core (each with the same frames,
 started together), as their users would spread frames over cores; spikejax
 runs each batch on one CPU device in a process of its own held to one core
-(`_OneCoreRun`: XLA's thread pool then has one thread) and split over all
-devices of this process (`spikejax.devices.shard_batch`). ``x_peer`` is a row's rate over its peer's
+(`_OneCoreRun`: XLA's thread pool then has one thread), split over all
+devices of this process (`spikejax.devices.shard_batch`), and, from
+`PROCESS_MIN_BATCH` streams on, split over one such process a core started
+together, as the peers are (and as `spikejax.workers` spreads a
+reproduction). ``x_peer`` is a row's rate over its peer's
 (skimage ``hough_line``, ``hough_circle``, the NumPy loop) on as many cores.
 
 Formulations measured (ratios in ``docs/ARCHITECTURE.md``, "Hough formulations
@@ -309,13 +312,27 @@ class _OneCoreRun:
     core afterwards time-slices them.) ``info`` is the row.
     """
 
-    def __init__(self, shape: str, mode: str, batch: int):
+    def __init__(self, shape: str, mode: str, batch: int, core: int = 0):
         if hasattr(os, "sched_setaffinity"):
-            os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+            cores = sorted(os.sched_getaffinity(0))
+            os.sched_setaffinity(0, {cores[core % len(cores)]})
         self._run, self.info = _spikejax(shape, mode, _row_events(shape, mode), batch, 1)
 
     def __call__(self) -> float:
         return self._run()
+
+
+def _process_row(row: dict, processes: int, batch: int) -> dict:
+    """A `_OneCoreRun` row of ``batch // processes`` streams made the row of ``processes`` such runs at once."""
+    return dict(
+        row,
+        implementation=f"{row['implementation']}, {processes} processes",
+        batch=batch,
+        frames=row["frames"] * processes,
+        events=row["events"] * processes,
+        cores=processes,
+        parallel=cores_label(processes, "process"),
+    )
 
 
 def mode_difference(events, params=None) -> dict:
@@ -341,6 +358,9 @@ def mode_difference(events, params=None) -> dict:
     )
 
 
+# The smallest batch also run as one process a core (each process its share of the streams, held to its core):
+# the peers' way of using every core, and that of `spikejax.workers`.
+PROCESS_MIN_BATCH = 16
 # The batch sizes timed: powers of 4 up to --trials, and --trials itself.
 POWERS_OF_4 = tuple(4**k for k in range(16))
 
@@ -436,6 +456,13 @@ def run(
                     runner, row = _spikejax(shape, mode, _row_events(shape, mode), b, d)
                 runs[row["implementation"], mode, b] = runner
                 rows[row["implementation"], mode, b] = row
+                if d > 1 and b >= PROCESS_MIN_BATCH and b % d == 0:
+                    runner = stack.enter_context(
+                        Processes(_OneCoreRun, shape, mode, b // d, processes=d, index_arg="core")
+                    )
+                    row = _process_row(runner.info()[0], d, b)
+                    runs[row["implementation"], mode, b] = runner
+                    rows[row["implementation"], mode, b] = row
         bar = tqdm(total=len(runs) * repeats, desc="hough bench: timing", disable=no_progress)
         best = interleaved(runs, repeats, progress=lambda _: bar.update())
         bar.close()
