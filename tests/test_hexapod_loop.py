@@ -148,10 +148,15 @@ def test_the_oracle_in_view_turns_by_depth_and_only_while_the_prey_is_in_the_cam
     size = 0.03
     boundary = cam.D_NEAR + 0.5 * size  # near: depth along the camera's axis within this
 
-    def state(bearing, distance):
-        scene = SimpleNamespace(size=jnp.full((4,), size, jnp.float32))
+    def state(bearing, distance, sizes=(size, size, size, size), nearest=0):
+        scene = SimpleNamespace(size=jnp.asarray(sizes, jnp.float32))
         return SimpleNamespace(
-            info={"bearing": jnp.float32(bearing), "distance": jnp.float32(distance), "scene": scene}
+            info={
+                "bearing": jnp.float32(bearing),
+                "distance": jnp.float32(distance),
+                "scene": scene,
+                "nearest": jnp.int32(nearest),
+            }
         )
 
     gait = init(jax.random.key(0))
@@ -165,6 +170,11 @@ def test_the_oracle_in_view_turns_by_depth_and_only_while_the_prey_is_in_the_cam
     assert int(a) == 1
     gait, a = act(gait, state(1.1 * half, 5.0))  # out of view: the left turn is held, far or not
     assert int(a) == 1
+    # The boundary is the nearest prey's own: a 0.3 m cube in slot 2 is near 0.135 m further out.
+    big = (size, size, 0.3, size)
+    depth = cam.D_NEAR + 0.1
+    assert int(act(0, state(b, depth / math.cos(b), big, nearest=2))[1]) == 2
+    assert int(act(0, state(b, depth / math.cos(b), big, nearest=0))[1]) == 0
 
 
 def test_summary_arithmetic_on_hand_made_episodes():

@@ -21,7 +21,8 @@ batches them with the env.
   seen or not.
 * `oracle_in_view`: the rule as the camera's windows apply it, on the truth:
   "near" when the nearest prey's depth along the camera's axis (its row in
-  the image, for a level camera) is within ``D_NEAR`` plus half its size,
+  the image, for a level camera) is within ``D_NEAR`` plus half its size
+  (that prey's own size, ``info["nearest"]``),
   a turn toward its side then, else forward; while the prey is outside the
   camera's horizontal field of view (`robots.hexapod.camera.HFOV_DEG`) the
   gait is held, as the SNN keeps its gait in silence. What the paper's rule
@@ -67,7 +68,8 @@ def _forward(key):
 def _oracle_in_view_act(gait, state):
     info = state.info
     bearing = info["bearing"]
-    near = info["distance"] * jnp.cos(bearing) <= D_NEAR + 0.5 * info["scene"].size[0]
+    size = info["scene"].size[info["nearest"]]
+    near = info["distance"] * jnp.cos(bearing) <= D_NEAR + 0.5 * size
     rule = jnp.where(near, jnp.where(bearing > 0, LEFT, RIGHT), FORWARD)
     seen = jnp.abs(bearing) <= math.radians(0.5 * HFOV_DEG)
     gait = jnp.where(seen, rule, gait).astype(jnp.int32)
