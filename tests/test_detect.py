@@ -10,6 +10,7 @@ import ast
 import math
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -258,3 +259,36 @@ def test_format_table_and_csv(tmp_path):
     detect_pipe.write_csv(tmp_path / "d.csv", rows)
     lines = (tmp_path / "d.csv").read_text().splitlines()
     assert lines[0] == ",".join(detect_pipe.COLUMNS) and lines[2] == "0.1,entry,0.0,30.0,50.0,60.0,0.0,0.0,1,3.0,0.75"
+
+
+def test_a_circle_grid_on_2x2_bins_finds_the_entry_in_sensor_pixels():
+    """``Detector(circle_bin=2)``: a 64 x 64 grid on the 128 x 128 sensor's events, summed over 2 x 2 bins."""
+    from spikejax.vision import hough
+
+    scene = scenes.lying_pipe(n_frames=31, centre=(50.0, 60.0), radius=16.0, speed=1.0, growth=0.5)
+    events, overflow = dvs.difference_events(scene.frames, scene.times, threshold=0.1, capacity=4096)
+    assert int(overflow.sum()) == 0
+    events = jax.tree.map(lambda v: v.reshape(6, 5, -1), events)  # 6 slots of 5 frames
+    times = np.asarray(scene.times[1:], np.float32).reshape(6, 5)
+    det = detect.Detector(line=None, circle=hough.CircleGrid(64, 64, n_r=32, r_min=1.0, r_step=1.0), circle_bin=2)
+    assert det.sensor == (128, 128)
+    _, _, e = detect.run(det, detect.detector_params(v_th=64.0), events, times)
+    assert np.asarray(e.valid).all()
+    a, r = (_slot_truth(v, 100.0, 0.05, 6) for v in (scene.truth.a, scene.truth.r))
+    np.testing.assert_allclose(e.pos, a, atol=4.0)  # sensor pixels, as the full grid's (test above)
+    np.testing.assert_allclose(e.row, 60.0, atol=2.0)
+    np.testing.assert_allclose(e.width, 2 * r, atol=4.0)
+
+
+def test_circle_bins_sum_the_image_and_move_the_events():
+    det = detect.Detector(line=None, circle=detect.hough.CircleGrid(3, 2, n_r=1), circle_bin=2)
+    assert det.sensor == (4, 6)
+    image = np.arange(24.0).reshape(4, 6)
+    top = [0 + 1 + 6 + 7, 2 + 3 + 8 + 9, 4 + 5 + 10 + 11]
+    bottom = [12 + 13 + 18 + 19, 14 + 15 + 20 + 21, 16 + 17 + 22 + 23]
+    np.testing.assert_array_equal(detect.circle_image(det, jnp.asarray(image)), [top, bottom])
+    one = detect.Events(np.array([5]), np.array([3]), np.zeros(1, np.float32), np.ones(1, np.int32), np.ones(1, bool))
+    ev = detect.circle_events(det, one)
+    assert (int(ev.x[0]), int(ev.y[0])) == (2, 1)
+    with pytest.raises(detect.UserError, match="covers 256 x 256 pixels, not the line grid.s 64 x 64"):
+        detect.Detector(line=detect.hough.LineGrid(64, 64), circle=detect.hough.CircleGrid(), circle_bin=1 + 1)

@@ -143,7 +143,7 @@ class PipeEnvParams(NamedTuple):
     narrow: jax.Array
 
 
-def default_tracker(circle: bool = False, sub_slots: int = 5, line: bool = True) -> stream.Tracker:
+def default_tracker(circle: bool = False, sub_slots: int = 5, line: bool = True, circle_bin: int = 1) -> stream.Tracker:
     """The loop's detector: the paper's 180 x 180 line grid in sync mode, slots of ``sub_slots`` steps.
 
     ``line=False`` (with ``circle=True``) drops the line grid and steers by
@@ -169,8 +169,15 @@ def default_tracker(circle: bool = False, sub_slots: int = 5, line: bool = True)
     """
     if not (line or circle):
         raise UserError("default_tracker needs the line grid, the circle grid or both")
-    grid = hough.CircleGrid(n_r=32, r_min=4.0, r_step=2.0) if circle else None
-    det = detect.Detector(line=hough.LineGrid() if line else None, circle=grid, mode="sync", sub_slots=sub_slots)
+    if circle_bin not in (1, 2):
+        raise UserError(
+            f"circle_bin must be 1 or 2 (the radii are 4-66 sensor pixels in steps of 2), not {circle_bin!r}"
+        )
+    b = circle_bin
+    grid = hough.CircleGrid(width=128 // b, height=128 // b, n_r=32, r_min=4.0 / b, r_step=2.0 / b) if circle else None
+    det = detect.Detector(
+        line=hough.LineGrid() if line else None, circle=grid, mode="sync", sub_slots=sub_slots, circle_bin=b
+    )
     target = ("any" if line else "entry") if circle else "body"
     return stream.Tracker(det, window=SWING.window, target=target, circle_per_slot=circle)
 

@@ -98,6 +98,10 @@ DISTANCE_HEADER = [
 DISTANCE_BINS = ((0.5, 1.0), (1.0, 1.5), (1.5, 2.0), (2.0, 2.5), (2.5, 3.0), (3.0, 4.0), (0.5, 3.0))
 """True-depth bins, m, of the distance-error table (ACCEPTANCE.md #3's 0.5 m bins; the last row pools 0.5-3 m)."""
 CHUNK = 64  # episodes per compiled batch
+# The lying pipes' circle grid on 2 x 2 bins (`spikejax.vision.detect.Detector`'s ``circle_bin``): on the
+# reproduction's first 32 episodes a side the same 16 / 13 entered as on every pixel, 2.3x faster (119 against
+# 269 s of one core), the entry's distance error at 2-3 m of depth about twice as large (docs/BENCHMARKS.md).
+CIRCLE_BIN = 2
 CIRCLE_CHUNK = 16  # with the circle grid: its (32, 128, 128) state and spectra per episode outgrow the cache
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
@@ -385,12 +389,15 @@ def run(
     situations: list[str] | None = None,
     devices: int = 1,
     lead: float | None = None,
+    circle_bin: int = CIRCLE_BIN,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
     ``lead``: m, how far the approach to a lying entry aims past its centre
     (`robots.snake.pipe_controller.ControllerParams`; default that of
     `robots.snake.pipe_controller.machine_params`, 0 the paper's ``C = sign(offset)``).
+    ``circle_bin``: the lying pipes' circle grid on bins of that many sensor
+    pixels a side (`CIRCLE_BIN`; 1: every pixel).
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -403,6 +410,8 @@ def run(
         raise UserError(f"--baselines must be >= 0, got {baselines}")
     if lead is not None and not 0 <= lead < 2:
         raise UserError(f"--lead must be in [0, 2) m, got {lead}")
+    if circle_bin not in (1, 2):
+        raise UserError(f"--circle-bin must be 1 or 2, got {circle_bin}")
     rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
@@ -436,11 +445,12 @@ def run(
     for name, lying, where, scenes in jobs:
         key = tuple(sorted((k, id(v)) for k, v in where.items()))
         if key not in envs:
-            env = pipe_env.PipeEnv(**where, tracker=pipe_env.default_tracker(circle=lying, line=not lying))
+            tracker = pipe_env.default_tracker(circle=lying, line=not lying, circle_bin=circle_bin if lying else 1)
+            env = pipe_env.PipeEnv(**where, tracker=tracker)
             envs[key] = tuple(
                 pipe_env.PipeEnv(
                     **where,
-                    tracker=pipe_env.default_tracker(circle=lying, line=not lying),
+                    tracker=tracker,
                     max_steps=steps_for(env) * env.slot_steps,
                     vision=vision,
                 )
@@ -496,6 +506,14 @@ def _add_arguments(parser) -> None:
         "0 gives the paper's C = sign(offset))",
     )
     parser.add_argument(
+        "--circle-bin",
+        type=int,
+        choices=(1, 2),
+        default=CIRCLE_BIN,
+        help="the lying pipes' circle grid on bins of N x N sensor pixels (default 2: a 64 x 64 grid, 2.3x faster "
+        "with the same entries measured; 1: every pixel)",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -523,6 +541,7 @@ def reproduce_command_run(
     cpu_devices: int | None = None,
     no_progress: bool = False,
     lead: float | None = None,
+    circle_bin: int | None = None,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -539,6 +558,7 @@ def reproduce_command_run(
             situations=situations,
             devices=devices,
             lead=lead,
+            circle_bin=CIRCLE_BIN if circle_bin is None else circle_bin,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")

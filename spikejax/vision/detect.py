@@ -45,6 +45,8 @@ __all__ = [
     "DetectorParams",
     "DetectorState",
     "Evidence",
+    "circle_events",
+    "circle_image",
     "detect",
     "detector_params",
     "event_images",
@@ -66,6 +68,12 @@ class Detector:
         mode: ``"sync"`` or ``"async"``.
         sub_slots: parts per slot; a neuron fires at most once per part.
         k: candidate spikes per polarity for `spikejax.vision.pipe.find_body`.
+        circle_bin: sensor pixels a side per circle-grid pixel. With 2, the
+            circle grid sees the events summed over 2 x 2 bins (its centres
+            and radii in those pixels: a 64 x 64 grid on a 128 x 128 sensor)
+            and its entries are reported in sensor pixels; its convolutions
+            and its update cost about a quarter. The sensor (`sensor`) is the
+            line grid's, else the circle grid's times ``circle_bin``.
     """
 
     line: hough.LineGrid | None = hough.LineGrid()
@@ -73,6 +81,7 @@ class Detector:
     mode: str = "sync"
     sub_slots: int = 5
     k: int = 32
+    circle_bin: int = 1
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -81,6 +90,22 @@ class Detector:
             raise UserError("the detector needs a line grid, a circle grid or both")
         if not (isinstance(self.sub_slots, int) and self.sub_slots >= 1):
             raise UserError(f"sub_slots must be a positive integer, not {self.sub_slots!r}")
+        if not (isinstance(self.circle_bin, int) and self.circle_bin >= 1):
+            raise UserError(f"circle_bin must be a positive integer, not {self.circle_bin!r}")
+        if self.circle_bin > 1 and self.circle is not None and self.line is not None:
+            binned = (self.circle.height * self.circle_bin, self.circle.width * self.circle_bin)
+            if binned != (self.line.height, self.line.width):
+                raise UserError(
+                    f"a circle grid of {self.circle.height} x {self.circle.width} in bins of {self.circle_bin} "
+                    f"covers {binned[0]} x {binned[1]} pixels, not the line grid's {self.line.height} x {self.line.width}"
+                )
+
+    @property
+    def sensor(self) -> tuple[int, int]:
+        """``(height, width)`` of the sensor, pixels: the line grid's, else the circle grid's times ``circle_bin``."""
+        if self.line is not None:
+            return self.line.height, self.line.width
+        return self.circle.height * self.circle_bin, self.circle.width * self.circle_bin
 
 
 class DetectorParams(NamedTuple):
@@ -159,6 +184,30 @@ def _flat(events: Events) -> Events:
     return jax.tree.map(lambda v: v.reshape(-1), events)
 
 
+def circle_events(det: Detector, events: Events) -> Events:
+    """The events in the circle grid's pixels: each at its ``circle_bin`` x ``circle_bin`` bin."""
+    if det.circle_bin == 1:
+        return events
+    return events._replace(x=events.x // det.circle_bin, y=events.y // det.circle_bin)
+
+
+def circle_image(det: Detector, image: jax.Array) -> jax.Array:
+    """A sensor image ``(height, width)`` summed over the circle grid's bins."""
+    b = det.circle_bin
+    if b == 1:
+        return image
+    h, w = image.shape
+    return image.reshape(h // b, b, w // b, b).sum(axis=(1, 3))
+
+
+def _entry_in_sensor_pixels(det: Detector, entry: pp.Pipe) -> pp.Pipe:
+    """An entry found on the binned circle grid, its centre and width in sensor pixels (a bin's centre)."""
+    b = det.circle_bin
+    if b == 1:
+        return entry
+    return entry._replace(pos=b * entry.pos + 0.5 * (b - 1), row=b * entry.row + 0.5 * (b - 1), width=b * entry.width)
+
+
 class Evidence(NamedTuple):
     """What one slot leaves for Alg. 2 (``None`` for a grid the `Detector` skips).
 
@@ -181,8 +230,9 @@ class Evidence(NamedTuple):
 
 
 def event_images(det: Detector, events: Events) -> tuple[jax.Array, jax.Array]:
-    """``(positive, negative)`` events per pixel, each ``(height, width)`` float32 (events of any shape)."""
-    grid = det.line if det.line is not None else det.circle
+    """``(positive, negative)`` events per sensor pixel, each ``det.sensor`` float32 (events of any shape)."""
+    height, width = det.sensor
+    grid = det.line if det.line is not None else dataclasses.replace(det.circle, height=height, width=width)
     events = _flat(events)
     signed = hough.event_image(grid, events, signed=True)
     count = hough.event_image(grid, events, signed=False)
@@ -196,7 +246,9 @@ def find_pipes(det: Detector, params: DetectorParams, evidence: Evidence, t) -> 
     opposite, most frequent pair, upright and drawn by the events),
     `spikejax.vision.pipe.find_entry` on the circle counts (the most active
     neuron whose ring the events draw), then
-    `spikejax.vision.pipe.classify` (one kind per object).
+    `spikejax.vision.pipe.classify` (one kind per object). ``evidence.image``
+    is in sensor pixels; the entry is judged on it binned as the circle grid
+    (`circle_image`) and reported in sensor pixels.
 
     Returns:
         ``(body, entry)``, `spikejax.vision.pipe.Pipe` scalars (``valid``
@@ -224,8 +276,9 @@ def find_pipes(det: Detector, params: DetectorParams, evidence: Evidence, t) -> 
             t,
             params.entry,
             strength=evidence.circle_votes,
-            image=evidence.image[0] + evidence.image[1],
+            image=circle_image(det, evidence.image[0] + evidence.image[1]),
         )
+        entry = _entry_in_sensor_pixels(det, entry)
     if det.line is not None and det.circle is not None:
         body, entry = pp.classify(body, entry)
     return body, entry
@@ -260,9 +313,10 @@ def slot_step(det: Detector, params: DetectorParams, state: DetectorState, event
         line_counts = pp.spike_counts(line_spikes, 2)
         line_votes = hough.line_votes(det.line, _flat(events))
     if det.circle is not None:
-        circle_state, spikes = _grid_spikes(det, det.circle, params.circle, circle_state, events, times)
+        binned = circle_events(det, events)
+        circle_state, spikes = _grid_spikes(det, det.circle, params.circle, circle_state, binned, times)
         circle_counts = pp.spike_counts(spikes, 3)
-        circle_votes = hough.circle_votes(det.circle, _flat(events), signed=False)
+        circle_votes = hough.circle_votes(det.circle, _flat(binned), signed=False)
     total = None if circle_counts is None else circle_counts[0] + circle_counts[1]
     evidence = Evidence(line_spikes, line_votes, total, circle_votes, event_images(det, events))
     body, entry = find_pipes(det, params, evidence, t)

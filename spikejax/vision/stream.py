@@ -163,15 +163,15 @@ def tracker_params(
             not given).
     """
     det = tracker.detector
-    grid = det.line if det.line is not None else det.circle
+    height, width = det.sensor
     if slot_steps is None:
         slot_steps = det.sub_slots
     if not 1 <= slot_steps <= det.sub_slots:
         raise UserError(f"slot_steps must be within 1..{det.sub_slots} (the detector's sub_slots), not {slot_steps}")
     if hold < 0:
         raise UserError(f"hold must be >= 0 slots, not {hold}")
-    detector = detect.detector_params(v_th=0.5 * grid.height) if detector is None else detector
-    track = pp.track_params(width=grid.width, assumed_distance=assumed_distance) if track is None else track
+    detector = detect.detector_params(v_th=0.5 * height) if detector is None else detector
+    track = pp.track_params(width=width, assumed_distance=assumed_distance) if track is None else track
     return TrackerParams(detector, track, jnp.asarray(slot_steps, jnp.int32), jnp.asarray(hold, jnp.int32))
 
 
@@ -233,13 +233,12 @@ class SlotOutput(NamedTuple):
 def _slot_tallies(det: detect.Detector):
     """Empty slot buffers: line spikes, line votes, circle counts, circle votes, event images."""
     z = lambda shape, dtype=jnp.float32: jnp.zeros(shape, dtype)  # noqa: E731
-    grid = det.line if det.line is not None else det.circle
     return (
         None if det.line is None else z((det.sub_slots, *det.line.shape), jnp.int8),
         None if det.line is None else z(det.line.shape),
         None if det.circle is None else z(det.circle.shape),
         None if det.circle is None else z(det.circle.shape),
-        (z((grid.height, grid.width)), z((grid.height, grid.width))),
+        (z(det.sensor), z(det.sensor)),
     )
 
 
@@ -262,10 +261,13 @@ def _image_is_circle_sensor(det: detect.Detector) -> bool:
     """Whether the slot's event images cover the circle grid's sensor, so its unsigned votes come from them.
 
     By linearity the slot's unsigned circle votes are those of the slot's
-    event count image: one convolution at the slot's end, not one a step.
+    event count image (binned as the grid, `spikejax.vision.detect.circle_image`):
+    one convolution at the slot's end, not one a step.
     """
-    grid = det.line if det.line is not None else det.circle
-    return det.circle is not None and (grid.height, grid.width) == (det.circle.height, det.circle.width)
+    if det.circle is None:
+        return False
+    binned = (det.circle.height * det.circle_bin, det.circle.width * det.circle_bin)
+    return det.sensor == binned
 
 
 def _grid_step(det, grid, params, state, events, t):
@@ -312,10 +314,11 @@ def step(
         line_spikes = line_spikes.at[state.steps].set(spikes, mode="drop")
         line_votes = line_votes + votes
     if det.circle is not None and not tracker.circle_per_slot:
-        circle, spikes = _grid_step(det, det.circle, params.detector.circle, circle, events, t)
+        binned = detect.circle_events(det, events)
+        circle, spikes = _grid_step(det, det.circle, params.detector.circle, circle, binned, t)
         circle_counts = circle_counts + (spikes != 0).astype(jnp.float32)
         if not _image_is_circle_sensor(det):
-            circle_votes = circle_votes + hough.circle_votes(det.circle, events, signed=False)
+            circle_votes = circle_votes + hough.circle_votes(det.circle, binned, signed=False)
     positive, negative = detect.event_images(det, events)
     ring = state.samples % tracker.window
     return state._replace(
@@ -353,9 +356,9 @@ def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) ->
     det = tracker.detector
     circle, circle_counts, circle_votes = state.grids.circle, state.circle_counts, state.circle_votes
     if det.circle is not None and _image_is_circle_sensor(det):
-        circle_votes = hough.circle_image_votes(det.circle, state.image[0] + state.image[1])
+        circle_votes = hough.circle_image_votes(det.circle, detect.circle_image(det, state.image[0] + state.image[1]))
     if tracker.circle_per_slot:
-        signed = hough.circle_image_votes(det.circle, state.image[0] - state.image[1])
+        signed = hough.circle_image_votes(det.circle, detect.circle_image(det, state.image[0] - state.image[1]))
         circle, spikes = hough.sync_update(params.detector.circle, circle, signed, t)
         circle_counts = (spikes != 0).astype(jnp.float32)
     evidence = detect.Evidence(state.line_spikes, state.line_votes, circle_counts, circle_votes, state.image)
