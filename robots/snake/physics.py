@@ -648,11 +648,11 @@ class _CRunner:
             axis=1,
         )
         if self.pool is not None and n >= self.nthread:
-            with self.lock:  # one pool, shared by every caller
-                final = self._threaded(state, control)
+            with self.lock:  # one pool and one output buffer per batch size, shared by every caller:
+                # copied out before the next caller (another device's shard) writes the buffer again
+                final = self._threaded(state, control).astype(np.float32)
         else:
-            final = self._serial(state, control)
-        final = final.astype(np.float32)
+            final = self._serial(state, control).astype(np.float32)
         i = np.cumsum([1, self.nq, self.nv])
         return (
             final[:, i[0] : i[1]].reshape(*batch_shape, self.nq),
