@@ -196,3 +196,38 @@ def test_bench_quick_writes_consistent_table(tmp_path):
     assert float(c_row["vs_c_physics"]) == pytest.approx(1.0)
     # One thread against one, and (with several cores) one a core against as many.
     assert {r["cores"] for r in rows if r["impl"].startswith("MuJoCo C")} == {r["cores"] for r in rows}
+
+
+_TWO_DEVICES = textwrap.dedent(
+    """
+    import jax, jax.numpy as jnp, numpy as np
+    from spikejax import devices
+    devices.use_cpu_devices(2)
+    from robots.snake.gait import gait_params, joint_targets
+    from robots.snake.physics import make_physics
+    phys, gait = make_physics("mujoco", nthread=2), gait_params()
+
+    def run(steer):
+        def body(state, _):
+            return phys.step(state, joint_targets(gait, state.time, steer, 0.0, True)), None
+        return jax.lax.scan(body, phys.init(), None, length=200)[0].qpos
+
+    steers = jnp.linspace(-0.3, 0.3, 32)
+    split = devices.shard_batch(jax.vmap(run), jax.devices())
+    runs = [np.asarray(split(steers)) for _ in range(3)]
+    one = np.asarray(jax.jit(jax.vmap(run))(steers))
+    print(all(np.array_equal(r, one) for r in runs))
+    """
+)
+
+
+def test_a_batch_split_over_two_devices_steps_as_on_one():
+    """Both devices' shards (16 snakes each) reach the C pool at once: each must get its own states back.
+
+    The pool's output buffer is shared by batches of one size; a result still pointing into it when the
+    lock was released was overwritten by the other shard's, and runs split over devices differed from run to
+    run and from one device (measured before the copy was made in the lock).
+    """
+    out = subprocess.run([sys.executable, "-c", _TWO_DEVICES], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "True"
