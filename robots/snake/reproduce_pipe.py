@@ -541,7 +541,7 @@ def reproduce_command_run(
     cpu_devices: int | None = None,
     no_progress: bool = False,
     lead: float | None = None,
-    circle_bin: int | None = None,
+    circle_bin: int = CIRCLE_BIN,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -558,7 +558,7 @@ def reproduce_command_run(
             situations=situations,
             devices=devices,
             lead=lead,
-            circle_bin=CIRCLE_BIN if circle_bin is None else circle_bin,
+            circle_bin=circle_bin,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")

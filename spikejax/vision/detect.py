@@ -93,19 +93,26 @@ class Detector:
         if not (isinstance(self.circle_bin, int) and self.circle_bin >= 1):
             raise UserError(f"circle_bin must be a positive integer, not {self.circle_bin!r}")
         if self.circle_bin > 1 and self.circle is not None and self.line is not None:
-            binned = (self.circle.height * self.circle_bin, self.circle.width * self.circle_bin)
-            if binned != (self.line.height, self.line.width):
+            covers = self.circle_covers
+            if covers != (self.line.height, self.line.width):
                 raise UserError(
                     f"a circle grid of {self.circle.height} x {self.circle.width} in bins of {self.circle_bin} "
-                    f"covers {binned[0]} x {binned[1]} pixels, not the line grid's {self.line.height} x {self.line.width}"
+                    f"covers {covers[0]} x {covers[1]} pixels, not the line grid's {self.line.height} x {self.line.width}"
                 )
 
     @property
+    def circle_covers(self) -> tuple[int, int] | None:
+        """``(height, width)`` in sensor pixels that the circle grid covers (``None`` without one)."""
+        if self.circle is None:
+            return None
+        return self.circle.height * self.circle_bin, self.circle.width * self.circle_bin
+
+    @property
     def sensor(self) -> tuple[int, int]:
-        """``(height, width)`` of the sensor, pixels: the line grid's, else the circle grid's times ``circle_bin``."""
+        """``(height, width)`` of the sensor, pixels: the line grid's, else what the circle grid covers."""
         if self.line is not None:
             return self.line.height, self.line.width
-        return self.circle.height * self.circle_bin, self.circle.width * self.circle_bin
+        return self.circle_covers
 
 
 class DetectorParams(NamedTuple):

@@ -264,10 +264,7 @@ def _image_is_circle_sensor(det: detect.Detector) -> bool:
     event count image (binned as the grid, `spikejax.vision.detect.circle_image`):
     one convolution at the slot's end, not one a step.
     """
-    if det.circle is None:
-        return False
-    binned = (det.circle.height * det.circle_bin, det.circle.width * det.circle_bin)
-    return det.sensor == binned
+    return det.circle is not None and det.sensor == det.circle_covers
 
 
 def _grid_step(det, grid, params, state, events, t):
