@@ -280,6 +280,37 @@ def test_a_circle_grid_on_2x2_bins_finds_the_entry_in_sensor_pixels():
     np.testing.assert_allclose(e.width, 2 * r, atol=4.0)
 
 
+def test_a_circle_grid_with_centres_above_the_image_finds_a_ring_whose_lower_arc_alone_is_in_view():
+    """``Detector(circle_top=16)``: a near entry's ring, centred 30 pixels above the sensor, 70-85 pixels across.
+
+    Only its lower arc is in view (a quarter of the ring); the grid without rows above the image puts the
+    centre on the image and the column more than 10 pixels off.
+    """
+    from spikejax.vision import hough
+
+    scene = scenes.lying_pipe(n_frames=31, centre=(50.0, -30.0), radius=70.0, speed=1.0, growth=0.5)
+    events, overflow = dvs.difference_events(scene.frames, scene.times, threshold=0.1, capacity=8192)
+    assert int(overflow.sum()) == 0
+    events = jax.tree.map(lambda v: v.reshape(6, 5, -1), events)
+    times = np.asarray(scene.times[1:], np.float32).reshape(6, 5)
+    params = detect.detector_params(v_th=64.0, entry=detect.NEAR_ENTRY)
+    a, r = (_slot_truth(v, 100.0, 0.05, 6) for v in (scene.truth.a, scene.truth.r))
+    found = {}
+    for top in (16, 0):
+        grid = hough.CircleGrid(64, 64 + top, n_r=48, r_min=2.0, r_step=1.0)
+        det = detect.Detector(line=None, circle=grid, circle_bin=2, circle_top=top)
+        assert det.sensor == (128, 128)
+        _, _, found[top] = detect.run(det, params, events, times)
+    e = found[16]
+    assert np.asarray(e.valid).all()
+    np.testing.assert_allclose(e.pos, a, atol=3.0)
+    np.testing.assert_allclose(e.row, -30.0, atol=10.0)  # a partial arc pulls the centre towards it
+    np.testing.assert_allclose(e.width, 2 * r, rtol=0.12)
+    assert np.abs(np.asarray(found[0].pos) - a).max() > 10.0 and (np.asarray(found[0].row) >= 0).all()
+    with pytest.raises(detect.UserError, match="circle_top .64. leaves none of the circle grid.s 64 rows"):
+        detect.Detector(line=None, circle=hough.CircleGrid(64, 64), circle_top=64)
+
+
 def test_circle_bins_sum_the_image_and_move_the_events():
     det = detect.Detector(line=None, circle=detect.hough.CircleGrid(3, 2, n_r=1), circle_bin=2)
     assert det.sensor == (4, 6)
@@ -290,5 +321,11 @@ def test_circle_bins_sum_the_image_and_move_the_events():
     one = detect.Events(np.array([5]), np.array([3]), np.zeros(1, np.float32), np.ones(1, np.int32), np.ones(1, bool))
     ev = detect.circle_events(det, one)
     assert (int(ev.x[0]), int(ev.y[0])) == (2, 1)
+    above = detect.Detector(line=None, circle=detect.hough.CircleGrid(3, 3, n_r=1), circle_bin=2, circle_top=1)
+    assert above.sensor == (4, 6)
+    ev = detect.circle_events(above, one)
+    assert (int(ev.x[0]), int(ev.y[0])) == (2, 2)
+    np.testing.assert_array_equal(detect.circle_image(above, jnp.asarray(image)), [[0, 0, 0], top, bottom])
+    np.testing.assert_array_equal(detect.binned_image(above, jnp.asarray(image)), [top, bottom])
     with pytest.raises(detect.UserError, match="covers 256 x 256 pixels, not the line grid.s 64 x 64"):
         detect.Detector(line=detect.hough.LineGrid(64, 64), circle=detect.hough.CircleGrid(), circle_bin=1 + 1)

@@ -40,11 +40,13 @@ from spikejax.vision.events import Events
 __all__ = [
     "BODY",
     "ENTRY",
+    "NEAR_ENTRY",
     "Detections",
     "Detector",
     "DetectorParams",
     "DetectorState",
     "Evidence",
+    "binned_image",
     "circle_events",
     "circle_image",
     "detect",
@@ -74,6 +76,11 @@ class Detector:
             and its entries are reported in sensor pixels; its convolutions
             and its update cost about a quarter. The sensor (`sensor`) is the
             line grid's, else the circle grid's times ``circle_bin``.
+        circle_top: circle-grid rows above the sensor (in the grid's pixels):
+            its first ``circle_top`` rows of centres lie above the image, for
+            rings whose lower arc alone is in view (a lying pipe's entry seen
+            from close by and from below its axis). The grid's ``height`` counts
+            them; entries are reported in sensor rows (negative above the image).
     """
 
     line: hough.LineGrid | None = hough.LineGrid()
@@ -82,6 +89,7 @@ class Detector:
     sub_slots: int = 5
     k: int = 32
     circle_bin: int = 1
+    circle_top: int = 0
 
     def __post_init__(self):
         if self.mode not in MODES:
@@ -92,6 +100,12 @@ class Detector:
             raise UserError(f"sub_slots must be a positive integer, not {self.sub_slots!r}")
         if not (isinstance(self.circle_bin, int) and self.circle_bin >= 1):
             raise UserError(f"circle_bin must be a positive integer, not {self.circle_bin!r}")
+        if not (isinstance(self.circle_top, int) and self.circle_top >= 0):
+            raise UserError(f"circle_top must be a non-negative integer, not {self.circle_top!r}")
+        if self.circle is not None and self.circle_top >= self.circle.height:
+            raise UserError(
+                f"circle_top ({self.circle_top}) leaves none of the circle grid's {self.circle.height} rows on the sensor"
+            )
         if self.circle_bin > 1 and self.circle is not None and self.line is not None:
             covers = self.circle_covers
             if covers != (self.line.height, self.line.width):
@@ -105,7 +119,7 @@ class Detector:
         """``(height, width)`` in sensor pixels that the circle grid covers (``None`` without one)."""
         if self.circle is None:
             return None
-        return self.circle.height * self.circle_bin, self.circle.width * self.circle_bin
+        return (self.circle.height - self.circle_top) * self.circle_bin, self.circle.width * self.circle_bin
 
     @property
     def sensor(self) -> tuple[int, int]:
@@ -130,6 +144,9 @@ class DetectorParams(NamedTuple):
 # slot's events; an entry's ring half in view and half drawn.
 BODY = pp.BodyParams(max_tilt=math.radians(30.0), min_support=0.25)
 ENTRY = pp.EntryParams(min_count=1.0, min_coverage=0.5, min_in_view=0.5)
+# With centres above the image (`Detector.circle_top`) the grid looks for rings whose lower arc alone is
+# in view: a ring centred 16 rows above a 64-row image with a radius of 48 has 0.33 of it in view.
+NEAR_ENTRY = ENTRY._replace(min_in_view=0.3)
 
 
 def detector_params(
@@ -192,19 +209,26 @@ def _flat(events: Events) -> Events:
 
 
 def circle_events(det: Detector, events: Events) -> Events:
-    """The events in the circle grid's pixels: each at its ``circle_bin`` x ``circle_bin`` bin."""
-    if det.circle_bin == 1:
+    """The events in the circle grid's pixels: each at its ``circle_bin`` x ``circle_bin`` bin, ``circle_top`` rows down."""
+    b, top = det.circle_bin, det.circle_top
+    if b == 1 and top == 0:
         return events
-    return events._replace(x=events.x // det.circle_bin, y=events.y // det.circle_bin)
+    return events._replace(x=events.x // b, y=events.y // b + top)
 
 
-def circle_image(det: Detector, image: jax.Array) -> jax.Array:
-    """A sensor image ``(height, width)`` summed over the circle grid's bins."""
+def binned_image(det: Detector, image: jax.Array) -> jax.Array:
+    """A sensor image ``(height, width)`` summed over the circle grid's bins (the sensor's part of the grid)."""
     b = det.circle_bin
     if b == 1:
         return image
     h, w = image.shape
     return image.reshape(h // b, b, w // b, b).sum(axis=(1, 3))
+
+
+def circle_image(det: Detector, image: jax.Array) -> jax.Array:
+    """A sensor image ``(height, width)`` in the circle grid's pixels: binned, ``circle_top`` empty rows above."""
+    binned = binned_image(det, image)
+    return jnp.pad(binned, ((det.circle_top, 0), (0, 0))) if det.circle_top else binned
 
 
 def _entry_in_sensor_pixels(det: Detector, entry: pp.Pipe) -> pp.Pipe:
@@ -283,7 +307,8 @@ def find_pipes(det: Detector, params: DetectorParams, evidence: Evidence, t) -> 
             t,
             params.entry,
             strength=evidence.circle_votes,
-            image=circle_image(det, evidence.image[0] + evidence.image[1]),
+            image=binned_image(det, evidence.image[0] + evidence.image[1]),
+            top=det.circle_top,
         )
         entry = _entry_in_sensor_pixels(det, entry)
     if det.line is not None and det.circle is not None:

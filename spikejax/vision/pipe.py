@@ -354,6 +354,7 @@ def find_entry(
     strength: jax.Array | None = None,
     image: jax.Array | None = None,
     k: int = 16,
+    top: int = 0,
 ) -> Pipe:
     """The pipe entry: the circle-grid neuron that fired most in the slot (Section 2.3), if it is a ring.
 
@@ -375,9 +376,11 @@ def find_entry(
         image: optional events per pixel of the slot (any polarity),
             ``(height, width)``, for the ring test.
         k: candidates (static).
+        top: rows of centres above ``image`` (static): centre row ``b`` of
+            ``counts`` is row ``b - top`` of the image.
 
     Returns:
-        A `Pipe` of kind `ENTRY`: ``pos = a``, ``row = b``,
+        A `Pipe` of kind `ENTRY`: ``pos = a``, ``row = b - top``,
         ``width = 2 r``, ``theta = 0``.
     """
     if not isinstance(params, EntryParams):
@@ -389,7 +392,7 @@ def find_entry(
     ir, ib, ia = best // (height * width), (best // width) % height, best % width
     score = counts.reshape(-1)[best].astype(jnp.float32)
     r = jnp.asarray(radii, jnp.float32)[ir]
-    a, b = ia.astype(jnp.float32), ib.astype(jnp.float32)
+    a, b = ia.astype(jnp.float32), (ib - top).astype(jnp.float32)
     if image is None:
         coverage = jnp.ones((k,), jnp.float32)
         in_view = jnp.ones((k,), jnp.float32)

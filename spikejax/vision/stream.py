@@ -154,7 +154,8 @@ def tracker_params(
     Args:
         tracker: the static configuration (for the sensor and buffer sizes).
         detector: default `spikejax.vision.detect.detector_params` with
-            ``v_th`` half the sensor height.
+            ``v_th`` half the sensor height (and `spikejax.vision.detect.NEAR_ENTRY`'s
+            ``min_in_view`` for a circle grid with centres above the image).
         track: default `spikejax.vision.pipe.track_params` for the sensor's
             width, with ``assumed_distance``.
         slot_steps: default the buffer's size.
@@ -170,7 +171,9 @@ def tracker_params(
         raise UserError(f"slot_steps must be within 1..{det.sub_slots} (the detector's sub_slots), not {slot_steps}")
     if hold < 0:
         raise UserError(f"hold must be >= 0 slots, not {hold}")
-    detector = detect.detector_params(v_th=0.5 * height) if detector is None else detector
+    if detector is None:
+        entry = detect.NEAR_ENTRY if det.circle_top else detect.ENTRY
+        detector = detect.detector_params(v_th=0.5 * height, entry=entry)
     track = pp.track_params(width=width, assumed_distance=assumed_distance) if track is None else track
     return TrackerParams(detector, track, jnp.asarray(slot_steps, jnp.int32), jnp.asarray(hold, jnp.int32))
 
