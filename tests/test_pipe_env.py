@@ -266,15 +266,46 @@ def test_action_1_narrows_the_gaits_lateral_amplitude_only():
         pipe_env.PipeEnv(narrow=0.0)
 
 
-def _slot_state(seen: bool, control: float, d_est: float, offset: float | None = None):
-    """What `pc.bang_bang` reads of the env's state after a slot's end: a body detection (or none), Alg. 3's estimates."""
+def _slot_state(seen: bool, control: float, d_est: float, offset: float | None = None, side: float = 0.0):
+    """What `pc.bang_bang` reads of the env's state after a slot's end: a body detection (or none), Alg. 3's estimates
+    (``side``: its ``pipeOffset``, across the camera's axis)."""
     valid = jnp.asarray(seen)
     slot = SimpleNamespace(
         body=SimpleNamespace(valid=valid), entry=SimpleNamespace(valid=jnp.asarray(False)), control=jnp.float32(control)
     )
     offset = 0.1 * control if offset is None else offset
-    info = {"slot": slot, "ended": jnp.asarray(True), "d_est": jnp.float32(d_est), "offset_est": jnp.float32(offset)}
+    info = {
+        "slot": slot,
+        "ended": jnp.asarray(True),
+        "d_est": jnp.float32(d_est),
+        "offset_est": jnp.float32(offset),
+        "side_est": jnp.float32(side),
+    }
     return SimpleNamespace(info=info)
+
+
+def test_the_near_circle_grid_keeps_a_lying_entry_in_sight_to_0_3_m(tmp_path):
+    """``default_tracker(near=True)``: snaking at a lying entry 1 m ahead, the ring is found in most slots between
+    0.3 and 0.6 m of true depth, where the grid of radii up to 66 px (its centres on the image) loses it."""
+    scene = tmp_path / "lying.toml"
+    scene.write_text(
+        '[snake]\nx = 0.0\ny = 0.0\nyaw_deg = 0.0\n\n[[pipe]]\nkind = "lying"\nx = 1.0\ny = 0.0\n'
+        "yaw_deg = 180.0\nradius = 0.26\nwall = 0.01\nlength = 3.0\n"
+    )
+    scene = pipes.load_scene(scene)
+    found = {}
+    for near in (True, False):
+        tracker = pipe_env.default_tracker(circle=True, line=False, circle_bin=2, near=near)
+        env = pipe_env.PipeEnv(scene=scene, tracker=tracker)
+        machine = pc.machine_params(True, near=near)
+        record, _ = jax.jit(lambda k: pipe_env.rollout(env, pc.bang_bang, machine, k, 100))(jax.random.key(0))
+        m = jax.device_get(record["metrics"])
+        ends = np.arange(len(m["depth"])) % env.slot_steps == env.slot_steps - 1
+        depth, seen = m["depth"][ends], m["entry_detected"][ends]
+        near_ones = (depth >= 0.3) & (depth < 0.6)
+        assert near_ones.sum() >= 10
+        found[near] = seen[near_ones].mean()
+    assert found[True] >= 0.8 and found[False] <= 0.5, found
 
 
 def test_the_lead_aims_past_the_centre_on_the_side_first_seen():
@@ -288,6 +319,19 @@ def test_the_lead_aims_past_the_centre_on_the_side_first_seen():
         assert float(action[0]) == c and float(cs.side) == -1.0
     cs, action = act(pc.ControllerParams(), init(), _slot_state(True, 1.0, 3.0, -0.5))
     assert float(action[0]) == 1.0  # the detector's C, whatever the offset says
+
+
+def test_the_camera_frame_steers_by_the_side_across_the_optical_axis():
+    """``camera_frame = 1``: ``C = sign(pipeOffset)`` (``info["side_est"]``), whatever ``cameraOffset`` adds;
+    with a lead, past the centre on the side first seen in that frame."""
+    init, act = pc.bang_bang
+    cs, action = act(pc.ControllerParams(camera_frame=1.0), init(), _slot_state(True, 1.0, 3.0, 0.3, side=-0.05))
+    assert float(action[0]) == -1.0 and float(cs.side) == -1.0
+    params = pc.ControllerParams(camera_frame=1.0, lead=0.1)
+    cs = init()
+    for side, c in ((0.2, 1.0), (-0.05, 1.0), (-0.15, -1.0)):
+        cs, action = act(params, cs, _slot_state(True, -1.0, 3.0, -0.4, side=side))
+        assert float(action[0]) == c and float(cs.side) == 1.0
 
 
 def test_the_blind_stretch_goes_straight_narrowed_for_its_dead_reckoned_time():

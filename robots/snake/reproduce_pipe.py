@@ -54,6 +54,7 @@ Timings and results: docs/BENCHMARKS.md, "Snake pipe loop".
 
 from __future__ import annotations
 
+import argparse
 import functools
 from pathlib import Path
 
@@ -102,6 +103,7 @@ CHUNK = 64  # episodes per compiled batch
 # reproduction's first 32 episodes a side the same 16 / 13 entered as on every pixel, 2.3x faster (119 against
 # 269 s of one core), the entry's distance error at 2-3 m of depth about twice as large (docs/BENCHMARKS.md).
 CIRCLE_BIN = 2
+NEAR = True  # the lying pipes' near circle grid (`robots.snake.pipe_env.default_tracker`'s ``near``)
 CIRCLE_CHUNK = 16  # with the circle grid: its (32, 128, 128) state and spectra per episode outgrow the cache
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
@@ -390,6 +392,7 @@ def run(
     devices: int = 1,
     lead: float | None = None,
     circle_bin: int = CIRCLE_BIN,
+    near: bool = NEAR,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
@@ -397,7 +400,9 @@ def run(
     (`robots.snake.pipe_controller.ControllerParams`; default that of
     `robots.snake.pipe_controller.machine_params`, 0 the paper's ``C = sign(offset)``).
     ``circle_bin``: the lying pipes' circle grid on bins of that many sensor
-    pixels a side (`CIRCLE_BIN`; 1: every pixel).
+    pixels a side (`CIRCLE_BIN`; 1: every pixel). ``near``: the lying pipes'
+    circle grid extended for the last metre and their state machine to match
+    (`NEAR`).
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -445,7 +450,9 @@ def run(
     for name, lying, where, scenes in jobs:
         key = tuple(sorted((k, id(v)) for k, v in where.items()))
         if key not in envs:
-            tracker = pipe_env.default_tracker(circle=lying, line=not lying, circle_bin=circle_bin if lying else 1)
+            tracker = pipe_env.default_tracker(
+                circle=lying, line=not lying, circle_bin=circle_bin if lying else 1, near=near and lying
+            )
             env = pipe_env.PipeEnv(**where, tracker=tracker)
             envs[key] = tuple(
                 pipe_env.PipeEnv(
@@ -460,7 +467,7 @@ def run(
         slots = steps_for(env)
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
-        machine = pc.machine_params(lying)
+        machine = pc.machine_params(lying, near=near)
         if lying and lead is not None:
             machine = machine._replace(lead=lead)
         for controller, res, sub in _conditions(
@@ -514,6 +521,13 @@ def _add_arguments(parser) -> None:
         "with the same entries measured; 1: every pixel)",
     )
     parser.add_argument(
+        "--near",
+        action=argparse.BooleanOptionalAction,
+        default=NEAR,
+        help="extend the lying pipes' circle grid to the last metre (larger rings, centres above the image) and "
+        "steer by it to the end (default on; --no-near: the grid to 0.44 m and a blind last stretch)",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -542,6 +556,7 @@ def reproduce_command_run(
     no_progress: bool = False,
     lead: float | None = None,
     circle_bin: int = CIRCLE_BIN,
+    near: bool = NEAR,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -559,6 +574,7 @@ def reproduce_command_run(
             devices=devices,
             lead=lead,
             circle_bin=circle_bin,
+            near=near,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
