@@ -119,7 +119,7 @@ class ControllerParams(NamedTuple):
 
 
 def machine_params(lying: bool, near: bool = False) -> ControllerParams:
-    """The state machine's parameters for a target kind: the blind ``FINAL`` stretch for a lying pipe only.
+    """The state machine's parameters for a target kind: a lying pipe's approach, with or without the ``near`` grid.
 
     A lying pipe's entry ring leaves the top of the image below about 0.8 m
     and the reduced circle grid's largest ring (`robots.snake.pipe_env.default_tracker`)

@@ -182,7 +182,7 @@ def default_tracker(
     On 16 lying-left episodes (40 s) the ring was found in 94 % of the slots
     at 0.3-0.45 m of true depth instead of 48 %, and in 84-70 % nearer
     (wrong more often: its side right 81 % of the time at 0.2-0.3 m); a lying
-    slot costs about 1.35 times as much (docs/BENCHMARKS.md, "Snake pipe
+    slot costs about 1.5 times as much (docs/BENCHMARKS.md, "Snake pipe
     loop: the reproduction").
     """
     if not (line or circle):

@@ -9,7 +9,9 @@ same trial, a check of determinism more than a sample). Each episode is
 `robots.snake.pipe_env.PipeEnv` driven by the spiking bang-bang controller
 (`robots.snake.pipe_controller.bang_bang`) for ``--seconds``; standing pipes
 with the line grid, lying ones with the reduced circle grid alone, as the
-paper detects them (`robots.snake.pipe_env.default_tracker`). The first ``--baselines``
+paper detects them (`robots.snake.pipe_env.default_tracker`), the lying
+ones' grid extended for the last metre and steered by to the end (``--near``,
+`robots.snake.pipe_controller.machine_params`). The first ``--baselines``
 episodes of each situation run again, the same placements and keys, going
 straight and with the privileged controller (the true side of the pipe):
 the lower and upper bounds of the bang-bang law. They read only the truth,
@@ -509,8 +511,8 @@ def _add_arguments(parser) -> None:
         type=float,
         default=None,
         metavar="M",
-        help="m the approach to a lying pipe aims past its entry's centre, on the side first seen (default 0.25; "
-        "0 gives the paper's C = sign(offset))",
+        help="m the approach to a lying pipe aims past its entry's centre, on the side first seen (default 0, "
+        "0.25 with --no-near; 0 gives the paper's C = sign(offset))",
     )
     parser.add_argument(
         "--circle-bin",
