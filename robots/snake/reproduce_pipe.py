@@ -106,7 +106,7 @@ CHUNK = 64  # episodes per compiled batch
 # 269 s of one core), the entry's distance error at 2-3 m of depth about twice as large (docs/BENCHMARKS.md).
 CIRCLE_BIN = 2
 NEAR = True  # the lying pipes' near circle grid (`robots.snake.pipe_env.default_tracker`'s ``near``)
-CIRCLE_CHUNK = 16  # with the circle grid: its (32, 128, 128) state and spectra per episode outgrow the cache
+CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
 
