@@ -145,7 +145,8 @@ class DetectorParams(NamedTuple):
 BODY = pp.BodyParams(max_tilt=math.radians(30.0), min_support=0.25)
 ENTRY = pp.EntryParams(min_count=1.0, min_coverage=0.5, min_in_view=0.5)
 # With centres above the image (`Detector.circle_top`) the grid looks for rings whose lower arc alone is
-# in view: a ring centred 16 rows above a 64-row image with a radius of 48 has 0.33 of it in view.
+# in view: on the snake's 2 x 2 bins a lying entry's ring 0.36 m away (radius 40 bins, its centre on the
+# image's top row, the image's columns cutting its sides) has 0.30 of it in view.
 NEAR_ENTRY = ENTRY._replace(min_in_view=0.3)
 
 
