@@ -17,7 +17,7 @@ import pytest
 
 from robots.snake import pipe_controller as pc
 from robots.snake import pipe_env, pipes
-from robots.snake.gait import gait_params, joint_targets
+from robots.snake.gait import gait_params, gait_period, joint_targets
 from spikejax.errors import UserError
 
 SLOTS = 160  # 800 control steps, 16 s
@@ -219,7 +219,7 @@ def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     assert float(row["wilson_low"]) == pytest.approx(float(low)) and float(row["wilson_high"]) == pytest.approx(
         float(high)
     )
-    # 2 s from 1.3 m: not reached; every failure has one label, and the two repeats of the scene agree.
+    # 2 s from 1.3 m: not reached by either start phase; every failure has one label, the same for both.
     assert k == 0
     fails = [int(row[f"fail_{label}"]) for label in LABELS]
     assert sum(fails) == 2 and max(fails) == 2
@@ -264,6 +264,44 @@ def test_action_1_narrows_the_gaits_lateral_amplitude_only():
         np.testing.assert_allclose(got[~odd], full[~odd], atol=1e-6)
     with pytest.raises(UserError, match="narrow"):
         pipe_env.PipeEnv(narrow=0.0)
+
+
+def test_half_a_period_later_the_gait_steered_the_other_way_is_the_mirror_image():
+    """Why ``random_phase`` makes a scene and its mirror the same task: at ``t + T/2`` with ``-C_o`` every lateral
+    target (and the head's compensation) changes sign and every dorsal one is unchanged."""
+    gait = gait_params()
+    params = pipe_env.PipeEnvParams(jnp.float32(0.1), jnp.float32(0.05), jnp.float32(0.5))
+    half = 0.5 * float(gait_period(gait))
+    lateral = np.arange(16) % 2 == 0  # joints 1, 3, ... at even indices
+    for t, c in ((0.0, 1.0), (0.37, -1.0), (1.9, 0.5)):
+        now = np.asarray(pipe_env.gait_targets(gait, params, t, jnp.array([c, 0.0])))
+        later = np.asarray(pipe_env.gait_targets(gait, params, t + half, jnp.array([-c, 0.0])))
+        np.testing.assert_allclose(later[lateral], -now[lateral], atol=2e-5)
+        np.testing.assert_allclose(later[~lateral], now[~lateral], atol=2e-5)
+
+
+def test_random_phase_draws_each_episodes_start_phase_from_its_key():
+    """Over one period, different for different keys, the same for the same key; 0 without ``random_phase``. The
+    physics follows: 1 s of straight slithering ends elsewhere from another phase."""
+    kw = dict(situation="lying-left", vision=False, max_steps=50)
+    on, off = pipe_env.PipeEnv(random_phase=True, **kw), pipe_env.PipeEnv(**kw)
+    keys = jax.random.split(jax.random.key(5), 8)
+    t0 = np.array([float(on.reset(k).info["gait_t0"]) for k in keys])
+    period = float(gait_period(on.gait))
+    assert np.all((t0 >= 0) & (t0 < period)) and np.unique(t0).size == 8 and np.ptp(t0) > 0.5 * period
+    assert float(on.reset(keys[0]).info["gait_t0"]) == t0[0]
+    assert float(off.reset(keys[0]).info["gait_t0"]) == 0.0
+
+    def head_after(env, key):
+        def one(s, _):
+            return env.step(s, jnp.zeros(2), slot_end=False), None
+
+        return jax.lax.scan(one, env.reset(key), None, length=50)[0].pipeline_state.head_pos[:2]
+
+    run = jax.jit(head_after, static_argnums=0)
+    a, b = np.asarray(run(on, keys[0])), np.asarray(run(on, keys[1]))
+    assert np.linalg.norm(a - b) > 1e-3
+    np.testing.assert_array_equal(np.asarray(run(off, keys[0])), np.asarray(run(off, keys[1])))
 
 
 def _slot_state(seen: bool, control: float, d_est: float, offset: float | None = None, side: float = 0.0):

@@ -259,6 +259,14 @@ class PipeEnv(Env):
             slots still end every ``slot_steps`` steps, with no detections):
             for controllers that read only the truth, such as the
             reproduction's baselines, at the cost of the physics alone.
+        random_phase: start the gait at a phase drawn from the reset's key
+            (its time offset uniform over one period, ``info["gait_t0"]``);
+            ``False``: every episode at phase 0. Half a period later the
+            gait steered by ``-C_o`` is the mirror image of the gait steered
+            by ``C_o`` (the lateral wave changes sign, the dorsal one, at
+            twice the frequency, does not), so over random phases a scene
+            and its mirror image are the same task; at one fixed phase they
+            are not (the snake's start differs, and so does every turn).
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
@@ -282,6 +290,7 @@ class PipeEnv(Env):
         max_per_pixel: int = 4,
         narrow: float = 0.5,
         vision: bool = True,
+        random_phase: bool = False,
         **physics_kwargs: Any,
     ):
         if situation not in pipes.SITUATIONS:
@@ -327,6 +336,7 @@ class PipeEnv(Env):
         self.event_capacity = int(event_capacity)
         self.params = PipeEnvParams(jnp.float32(max_steer), jnp.float32(event_threshold), jnp.float32(narrow))
         self.compensate = bool(compensate)
+        self.random_phase = bool(random_phase)
         self.gait = gait_params() if gait is None else gait
         self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
 
@@ -371,6 +381,9 @@ class PipeEnv(Env):
         params = self.params if params is None else PipeEnvParams(*(jnp.asarray(x, jnp.float32) for x in params))
         phys = self.physics.init()
         phys = start_at(phys, scene.start[0], scene.start[1], scene.start[2])
+        period = gait_period(self.gait)
+        phase = jax.random.uniform(jax.random.fold_in(rng, _PHASE_TAG), (), jnp.float32, 0.0, period)
+        gait_t0 = phase if self.random_phase else jnp.zeros((), jnp.float32)
         phys = pipes.place_pipes(phys, scene)
         frame = self._frame(phys, scene)
         events, _ = dvs.frame_difference(frame, frame, phys.time, threshold=1.0, capacity=self.event_capacity)
@@ -398,6 +411,7 @@ class PipeEnv(Env):
             "offset_est": zero,
             "side_est": zero,
             "distance": self._distance(phys, scene),
+            "gait_t0": gait_t0,
         }
         if self.dvs == "contrast":
             key = jax.random.fold_in(rng, _DVS_TAG)
@@ -424,7 +438,7 @@ class PipeEnv(Env):
         info = dict(state.info)
         params, scene = info["params"], info["scene"]
         phys = state.pipeline_state
-        ctrl = gait_targets(self.gait, params, phys.time, action, self.compensate)
+        ctrl = gait_targets(self.gait, params, phys.time + info["gait_t0"], action, self.compensate)
         phys = self.physics.step(phys, ctrl)
         if not self.vision:
             return self._blind_step(state, info, phys, slot_end)
@@ -562,6 +576,7 @@ class PipeEnv(Env):
         }
 
 
+_PHASE_TAG = 0x47414954  # folded into the reset's key for the gait's start phase
 _DVS_TAG = 0x44565321  # folded into the reset's key for the contrast DVS's mismatch and noise
 
 

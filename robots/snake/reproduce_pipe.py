@@ -4,8 +4,7 @@ The paper ran one trajectory per situation; this runs ``--episodes`` per
 situation (standing or lying pipe, left or right: `robots.snake.pipes.SITUATIONS`,
 placements from `robots.snake.pipes.sample`), or, with ``--scene FILE``, that
 scene in every episode (one row per pipe; the episodes differ in the key
-only, which a scene file's fixed placement does not use: they repeat the
-same trial, a check of determinism more than a sample). Each episode is
+only: the gait's start phase, ``--random-phase``). Each episode is
 `robots.snake.pipe_env.PipeEnv` driven by the spiking bang-bang controller
 (`robots.snake.pipe_controller.bang_bang`) for ``--seconds``; standing pipes
 with the line grid, lying ones with the reduced circle grid alone, as the
@@ -106,6 +105,9 @@ CHUNK = 64  # episodes per compiled batch
 # 269 s of one core), the entry's distance error at 2-3 m of depth about twice as large (docs/BENCHMARKS.md).
 CIRCLE_BIN = 2
 NEAR = True  # the lying pipes' near circle grid (`robots.snake.pipe_env.default_tracker`'s ``near``)
+# Each episode's gait starts at a phase drawn from its key (`robots.snake.pipe_env.PipeEnv`'s ``random_phase``): at
+# phase 0 for all, the first 64 lying placements a side entered 44 / 29 (left / right, docs/BENCHMARKS.md).
+RANDOM_PHASE = True
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
@@ -395,6 +397,7 @@ def run(
     lead: float | None = None,
     circle_bin: int = CIRCLE_BIN,
     near: bool = NEAR,
+    random_phase: bool = RANDOM_PHASE,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
@@ -404,7 +407,8 @@ def run(
     ``circle_bin``: the lying pipes' circle grid on bins of that many sensor
     pixels a side (`CIRCLE_BIN`; 1: every pixel). ``near``: the lying pipes'
     circle grid extended for the last metre and their state machine to match
-    (`NEAR`).
+    (`NEAR`). ``random_phase``: each episode's gait starts at a phase drawn
+    from its key (`RANDOM_PHASE`); else all at phase 0.
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -462,6 +466,7 @@ def run(
                     tracker=tracker,
                     max_steps=steps_for(env) * env.slot_steps,
                     vision=vision,
+                    random_phase=random_phase,
                 )
                 for vision in (True, False)
             )
@@ -530,6 +535,13 @@ def _add_arguments(parser) -> None:
         "steer by it to the end (default on; --no-near: the grid to 0.44 m and a blind last stretch)",
     )
     parser.add_argument(
+        "--random-phase",
+        action=argparse.BooleanOptionalAction,
+        default=RANDOM_PHASE,
+        help="start each episode's gait at a phase drawn from its seed (default on; --no-random-phase: all at phase "
+        "0, and a scene and its mirror image are different tasks)",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -559,6 +571,7 @@ def reproduce_command_run(
     lead: float | None = None,
     circle_bin: int = CIRCLE_BIN,
     near: bool = NEAR,
+    random_phase: bool = RANDOM_PHASE,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -577,6 +590,7 @@ def reproduce_command_run(
             lead=lead,
             circle_bin=circle_bin,
             near=near,
+            random_phase=random_phase,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
