@@ -8,7 +8,9 @@ and the gait. `PipeEnv` subclasses `brax.envs.base.Env` and returns Brax's
 step:
 
 1. the gait of Eq. (1) of the snake R-STDP paper (`robots.snake.gait.joint_targets`)
-   with ``C_o = action[0] * max_steer`` (positive turns right), held by the
+   with ``C_o = action[0] * max_steer`` (positive turns right), from the
+   episode's start phase (``random_phase``: drawn from the reset's key; else
+   0; ``info["gait_t0"]``, s), held by the
    servos while the physics (with the scene's pipes as mocap bodies,
    `robots.snake.physics.PipeBodies`) advances;
 2. the head camera renders the pipe scene (`robots.snake.camera.pipe_scene`);
