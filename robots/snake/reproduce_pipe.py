@@ -106,7 +106,8 @@ CHUNK = 64  # episodes per compiled batch
 CIRCLE_BIN = 2
 NEAR = True  # the lying pipes' near circle grid (`robots.snake.pipe_env.default_tracker`'s ``near``)
 # Each episode's gait starts at a phase drawn from its key (`robots.snake.pipe_env.PipeEnv`'s ``random_phase``): at
-# phase 0 for all, the first 64 lying placements a side entered 44 / 29 (left / right, docs/BENCHMARKS.md).
+# phase 0 for all, the lying entries of the default run were 148 / 122 of 256 (left / right), with it 125 / 127
+# (docs/BENCHMARKS.md).
 RANDOM_PHASE = True
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
