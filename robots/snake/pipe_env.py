@@ -383,9 +383,10 @@ class PipeEnv(Env):
         params = self.params if params is None else PipeEnvParams(*(jnp.asarray(x, jnp.float32) for x in params))
         phys = self.physics.init()
         phys = start_at(phys, scene.start[0], scene.start[1], scene.start[2])
-        period = gait_period(self.gait)
-        phase = jax.random.uniform(jax.random.fold_in(rng, _PHASE_TAG), (), jnp.float32, 0.0, period)
-        gait_t0 = phase if self.random_phase else jnp.zeros((), jnp.float32)
+        gait_t0 = jnp.zeros((), jnp.float32)
+        if self.random_phase:
+            key = jax.random.fold_in(rng, _PHASE_TAG)
+            gait_t0 = jax.random.uniform(key, (), jnp.float32, 0.0, gait_period(self.gait))
         phys = pipes.place_pipes(phys, scene)
         frame = self._frame(phys, scene)
         events, _ = dvs.frame_difference(frame, frame, phys.time, threshold=1.0, capacity=self.event_capacity)
