@@ -22,7 +22,7 @@ import pytest
 from spikejax import cli
 from spikejax.vision import io
 
-N_CASES = 80
+N_CASES = 40
 SEED = 13
 ARGS = ["--shapes", "lines", "--v-th", "6", "--slot", "0.02", "--capacity", "128", "--no-progress"]
 
@@ -194,7 +194,7 @@ def test_damaged_event_files_give_the_exact_result_or_one_line(undamaged, tmp_pa
             assert "Traceback" not in err and out == "", f"case {case} ({what})"
             outcomes["refused"] += 1
     # Both outcomes occur: the fuzz is neither all harmless nor all fatal.
-    assert outcomes["same"] >= 5 and outcomes["refused"] >= 40, outcomes
+    assert outcomes["same"] >= 2 and outcomes["refused"] >= 20, outcomes
 
 
 def test_a_zip_with_a_bad_crc_is_refused_in_one_line(undamaged, tmp_path, capsys):

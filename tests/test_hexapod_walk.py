@@ -88,13 +88,13 @@ def test_the_walk_command_writes_a_gait_table_from_trained_networks(tmp_path, ca
 
 
 def test_mjx_walks_as_mujoco_c():
-    """Four cycles of G1 and G2 on MJX and on MuJoCo C: the torso within 1 cm and 2 deg (it compiles in seconds)."""
+    """Two cycles of G1 and G2 on MJX and on MuJoCo C: the torso within 1 cm and 2 deg (it compiles in seconds)."""
     model = physics.load_model()
     p = step_params()
-    t = jnp.arange(640) * 0.002
+    t = jnp.arange(320) * 0.002
     ctrl = np.stack([np.asarray(servo_targets(p, jnp.asarray(PATTERNS[g][np.arange(8) % PERIOD]), t)) for g in (0, 1)])
     ours = physics.mjx_walk(model, ctrl)
     c = physics.walk([model, model], ctrl, nthread=1)
     assert np.abs(ours.xy - c.xy).max() < 0.01
     assert np.degrees(np.abs(ours.yaw - c.yaw).max()) < 2.0
-    assert c.xy[0, -1, 0] > 0.2 and np.degrees(c.yaw[1, -1]) > 20
+    assert c.xy[0, -1, 0] > 0.1 and np.degrees(c.yaw[1, -1]) > 10

@@ -91,6 +91,7 @@ def _mean_abs_head(trace) -> float:
     return float(np.degrees(np.abs(trace.a_head)).mean())
 
 
+@pytest.mark.slow  # about 90 s: a training
 def test_a_short_ppo_training_tracks_better_than_the_untrained_policy():
     """About 100k env steps on the 8 (true angles, ~30 s): the head faces the target three times better on the zigzag.
 
