@@ -133,6 +133,7 @@ def test_same_spikes_with_learning_off_and_the_robot_held():
     np.testing.assert_array_equal(brian2_counts, spikejax_counts)
 
 
+@pytest.mark.slow  # about 25 s; Brian2's network against ours stays in the suite (flight 0 above)
 def test_brian2_and_spikejax_fly_the_same_closed_loop():
     """Hold, then toward q1 and q2, learning online: the same outputs, teacher and robot state."""
     brian2, jx = brian2_flight(), spikejax_flight()

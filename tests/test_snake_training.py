@@ -10,6 +10,7 @@ import pytest
 from robots.snake import rstdp, tracks, training
 
 
+@pytest.mark.slow  # about 30 s; a member alone and in a batch in the suite: test_rollout.py, test_snake_trial.py
 def test_a_seed_trains_to_the_same_weights_alone_or_in_a_batch_of_64():
     config = rstdp.NetworkConfig(topology="separated")
     params = rstdp.network_params(config)
