@@ -212,6 +212,7 @@ def test_a_zip_with_a_bad_crc_is_refused_in_one_line(undamaged, tmp_path, capsys
     )
 
 
+@pytest.mark.slow  # about 15 s of processes; the same damage in process above, the real CLI's errors in test_outputs.py
 def test_damaged_files_through_the_real_cli(undamaged, tmp_path):
     # The same check in a process of its own for a few cases: the exit status and stderr are the program's.
     clean = tmp_path / "clean.npz"

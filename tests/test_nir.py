@@ -458,6 +458,7 @@ def _torch_counts(module, layers, inputs):
     return {name: torch.cat(v).sum(0).numpy() for name, v in recorded.items()}
 
 
+@pytest.mark.slow  # about 20 s; snnTorch against ours stays in the suite on the snake's basic net (below)
 def test_robobee_controller_in_snntorch_counts_the_same_spikes(robobee):
     """The exported RoboBee controller in snnTorch, driven by the same ``q(t)`` for 1 s.
 

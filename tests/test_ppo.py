@@ -143,7 +143,9 @@ def test_train_ppo_saves_a_policy_that_evaluate_reads_and_a_finished_run_is_kept
         load_policy(out)
 
 
-@pytest.mark.parametrize("backend", ["mujoco", pytest.param("mjx", marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "backend", [pytest.param("mujoco", marks=pytest.mark.slow), pytest.param("mjx", marks=pytest.mark.slow)]
+)
 def test_brax_ppo_trains_a_few_iterations_on_either_backend(backend):
     """Brax's jitted, vmapped training step on the env: MuJoCo C through its callback, or MJX (~35 s on a CPU: slow)."""
     task = ppo.make_task("snake-track", "angles", backend=backend)
