@@ -147,6 +147,10 @@ def test_bad_arguments_are_one_line_errors():
 
     with pytest.raises(UserError, match="--lead"):
         rp.run(None, 1, 1.0, lead=-0.5)
+    with pytest.raises(UserError, match="entry_memory"):
+        pipe_env.PipeEnv(entry_memory=1.5)
+    with pytest.raises(UserError, match="--entry-memory"):
+        rp.run(None, 1, 1.0, entry_memory=-0.1)
 
 
 def test_failure_labels_take_the_first_cause_that_applies():
@@ -377,6 +381,53 @@ def test_the_camera_frame_steers_by_the_side_across_the_optical_axis():
     for side, c in ((0.2, 1.0), (-0.05, 1.0), (-0.15, -1.0)):
         cs, action = act(params, cs, _slot_state(True, -1.0, 3.0, -0.4, side=side))
         assert float(action[0]) == c and float(cs.side) == 1.0
+
+
+def test_the_remembered_entry_is_placed_by_the_cameras_pose_and_seen_from_the_next():
+    """`pipe_env.remember_entry` and `entry_in_view` by hand: a camera facing +y sees the entry 2 m ahead and 0.5 m
+    to its right, at (1.5, 4); from (1.5, 3) facing +x it is 1 m to the left, straight abeam."""
+    along_y = jnp.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # columns: forward, left, up
+    along_x = jnp.eye(3)
+    pos = jnp.array([1.0, 2.0, 0.05])
+    empty = jnp.zeros(3)
+    mem, ok = pipe_env.remember_entry(empty, jnp.asarray(False), jnp.asarray(True), pos, along_y, 2.0, 0.5, 0.3)
+    np.testing.assert_allclose(mem, [1.5, 4.0, 0.05], atol=1e-6)  # the first detection taken whole
+    assert bool(ok)
+    np.testing.assert_allclose(pipe_env.entry_in_view(mem, pos, along_y), (2.0, 0.5), atol=1e-6)
+    np.testing.assert_allclose(
+        pipe_env.entry_in_view(mem, jnp.array([1.5, 3.0, 0.05]), along_x), (0.0, -1.0), atol=1e-6
+    )
+    # A second detection 0.2 m further right moves it by the weight; none leaves it.
+    moved, _ = pipe_env.remember_entry(mem, ok, jnp.asarray(True), pos, along_y, 2.0, 0.7, 0.3)
+    np.testing.assert_allclose(moved, [1.56, 4.0, 0.05], atol=1e-6)
+    kept, ok2 = pipe_env.remember_entry(mem, ok, jnp.asarray(False), pos, along_y, 2.0, 0.7, 0.3)
+    np.testing.assert_array_equal(kept, mem)
+    assert bool(ok2)
+    _, none = pipe_env.remember_entry(empty, jnp.asarray(False), jnp.asarray(False), pos, along_y, 2.0, 0.7, 0.3)
+    assert not bool(none)
+
+
+def test_with_memory_every_slot_end_steers_by_the_remembered_side():
+    """``memory = 1``: at a slot's end ``C = sign(info["mem_side"])`` once the env remembers an entry, with or without
+    a detection this slot; between slot ends, before there is a memory, or with ``memory = 0``: as before."""
+    init, act = pc.bang_bang
+    params = pc.ControllerParams(camera_frame=1.0, memory=1.0)
+    cs, action = act(params, init(), _slot_state(True, 1.0, 3.0, side=0.3))
+    assert float(action[0]) == 1.0  # no memory yet: the detection's side
+
+    def with_memory(state, side, ended=True):
+        state.info.update(mem_ok=jnp.asarray(True), mem_side=jnp.float32(side), ended=jnp.asarray(ended))
+        return state
+
+    cs, action = act(params, cs, with_memory(_slot_state(True, 1.0, 3.0, side=0.3), -0.2))
+    assert float(action[0]) == -1.0  # the memory, against this slot's detection
+    cs, action = act(params, cs, with_memory(_slot_state(False, 0.0, 3.0), 0.1))
+    assert float(action[0]) == 1.0  # nothing seen this slot: still the memory
+    cs, action = act(params, cs, with_memory(_slot_state(False, 0.0, 3.0), -0.1, ended=False))
+    assert float(action[0]) == 1.0  # between slot ends the C in force is held
+    plain = pc.ControllerParams(camera_frame=1.0)
+    cs, action = act(plain, init(), with_memory(_slot_state(True, 1.0, 3.0, side=0.3), -0.2))
+    assert float(action[0]) == 1.0
 
 
 def test_the_blind_stretch_goes_straight_narrowed_for_its_dead_reckoned_time():

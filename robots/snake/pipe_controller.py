@@ -107,6 +107,9 @@ class ControllerParams(NamedTuple):
         camera_frame: 1: ``offset`` is the detection's side across the head camera's optical axis (Alg. 3's
             ``pipeOffset``, ``info["side_est"]``), the signal the `privileged` controller gets; 0: the
             paper's ``offset = pipeOffset + cameraOffset``, from the central line (``info["offset_est"]``).
+        memory: 1: once the env remembers an entry (`robots.snake.pipe_env.PipeEnv`'s ``entry_memory``), every
+            slot's end in APPROACH steers by its side in the camera's frame, ``C = sign(info["mem_side"])``,
+            seen this slot or not; 0: by the slot's detection.
     """
 
     lost_slots: float | jax.Array = 100
@@ -116,6 +119,7 @@ class ControllerParams(NamedTuple):
     narrow: float | jax.Array = 0.0
     lead: float | jax.Array = 0.0
     camera_frame: float | jax.Array = 0.0
+    memory: float | jax.Array = 0.0
 
 
 def machine_params(lying: bool, near: bool = False) -> ControllerParams:
@@ -157,7 +161,7 @@ def machine_params(lying: bool, near: bool = False) -> ControllerParams:
     25, and with none 44 / 29.
     """
     if lying and near:
-        return ControllerParams(final_distance=0.0, lead=0.0, camera_frame=1.0)
+        return ControllerParams(final_distance=0.0, lead=0.0, camera_frame=1.0, memory=1.0)
     if lying:
         return ControllerParams(final_distance=0.45, lead=0.25)
     return ControllerParams(final_distance=0.0)
@@ -201,6 +205,8 @@ def _bang_bang_act(params: ControllerParams, cstate: ControllerState, state):
     own = (params.lead > 0) | camera
     steer = jnp.where(own, jnp.sign(offset + params.lead * side), slot.control.astype(jnp.float32))
     held = jnp.where(seen, steer, cstate.control)
+    remembered = ended & (params.memory > 0) & info.get("mem_ok", jnp.zeros((), bool))
+    held = jnp.where(remembered, jnp.sign(info.get("mem_side", jnp.zeros((), jnp.float32))), held)
     control = jnp.where(mode == APPROACH, held, 0.0)
     narrow = jnp.where(mode >= FINAL, params.narrow, 0.0)
     return ControllerState(mode, control, since, blind, side), _action(control, narrow)

@@ -269,6 +269,14 @@ class PipeEnv(Env):
             twice the frequency, does not), so over random phases a scene
             and its mirror image are the same task; at one fixed phase they
             are not (the snake's start differs, and so does every turn).
+        entry_memory: the weight, in (0, 1], with which each entry detection
+            at Alg. 3's distance ``>= MEMORY_MIN_DEPTH`` moves the remembered
+            entry (`remember_entry`: the detection placed in the world by the
+            head camera's pose, an exponential average); 0 (default): none.
+            ``info["mem_depth"]`` / ``info["mem_side"]`` give the remembered
+            entry in the camera's frame at every step, ``info["mem_ok"]``
+            whether there is one; `robots.snake.pipe_controller`'s ``memory``
+            steers by it.
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
@@ -293,6 +301,7 @@ class PipeEnv(Env):
         narrow: float = 0.5,
         vision: bool = True,
         random_phase: bool = False,
+        entry_memory: float = 0.0,
         **physics_kwargs: Any,
     ):
         if situation not in pipes.SITUATIONS:
@@ -339,6 +348,9 @@ class PipeEnv(Env):
         self.params = PipeEnvParams(jnp.float32(max_steer), jnp.float32(event_threshold), jnp.float32(narrow))
         self.compensate = bool(compensate)
         self.random_phase = bool(random_phase)
+        if not 0.0 <= entry_memory <= 1.0:
+            raise UserError(f"entry_memory must be in [0, 1], got {entry_memory}")
+        self.entry_memory = float(entry_memory)
         self.gait = gait_params() if gait is None else gait
         self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
 
@@ -415,6 +427,10 @@ class PipeEnv(Env):
             "side_est": zero,
             "distance": self._distance(phys, scene),
             "gait_t0": gait_t0,
+            "mem": jnp.zeros(3, jnp.float32),
+            "mem_ok": no,
+            "mem_depth": zero,
+            "mem_side": zero,
         }
         if self.dvs == "contrast":
             key = jax.random.fold_in(rng, _DVS_TAG)
@@ -481,6 +497,14 @@ class PipeEnv(Env):
             offset_est=jnp.where(ended & est.valid, est.offset, info["offset_est"]),
             side_est=jnp.where(ended & est.valid, est.pipe_offset, info["side_est"]),
         )
+        if self.entry_memory > 0:
+            seen = ended & out.entry.valid & (info["d_est"] >= MEMORY_MIN_DEPTH)
+            mem, ok = remember_entry(
+                info["mem"], info["mem_ok"], seen, phys.head_pos, phys.head_mat,
+                info["d_est"], info["side_est"], self.entry_memory,
+            )  # fmt: skip
+            depth, side = entry_in_view(mem, phys.head_pos, phys.head_mat)
+            info.update(mem=mem, mem_ok=ok, mem_depth=depth, mem_side=side)
         return self._outcome(state, info, phys)
 
     def _blind_step(self, state: State, info: dict, phys, slot_end) -> State:
@@ -581,6 +605,31 @@ class PipeEnv(Env):
 
 _PHASE_TAG = 0x47414954  # folded into the reset's key for the gait's start phase
 _DVS_TAG = 0x44565321  # folded into the reset's key for the contrast DVS's mismatch and noise
+
+
+MEMORY_MIN_DEPTH = 0.3
+"""Alg. 3's distance, m, below which an entry detection no longer moves the remembered entry: below it the ring
+outgrows the near circle grid and its side is right in 54-81 % of the slots (against 86-96 % from 0.3 to 1.2 m)."""
+
+
+def remember_entry(mem, ok, seen, cam_pos, cam_rot, depth, side, weight):
+    """The remembered entry after a slot: ``seen``'s detection, ``depth`` ahead and ``side`` to the right of the head
+    camera at ``cam_pos`` (3,) with ``cam_rot``'s columns its forward, left and up axes, placed in the world and
+    averaged into ``mem`` (3,) with ``weight`` (the first detection is taken whole). Returns ``(mem, ok)``.
+
+    Only differences of the camera's pose enter the steering (`entry_in_view`), so the world frame stands for
+    what the head's odometry (an IMU and the joint angles) would integrate over the seconds of an approach; here
+    the physics' pose, exact.
+    """
+    point = cam_pos + depth * cam_rot[:, 0] - side * cam_rot[:, 1]
+    moved = jnp.where(ok, (1.0 - weight) * mem + weight * point, point)
+    return jnp.where(seen, moved, mem), ok | seen
+
+
+def entry_in_view(mem, cam_pos, cam_rot):
+    """``(depth, side)`` of the remembered point ``mem`` in the camera's frame: m ahead, m to the right."""
+    rel = mem - cam_pos
+    return rel @ cam_rot[:, 0], -(rel @ cam_rot[:, 1])
 
 
 def _steering_estimate(tracker: stream.Tracker, out: stream.SlotOutput):

@@ -10,7 +10,8 @@ only: the gait's start phase, ``--random-phase``). Each episode is
 with the line grid, lying ones with the reduced circle grid alone, as the
 paper detects them (`robots.snake.pipe_env.default_tracker`), the lying
 ones' grid extended for the last metre and steered by to the end (``--near``,
-`robots.snake.pipe_controller.machine_params`). The first ``--baselines``
+`robots.snake.pipe_controller.machine_params`), the entry remembered in the
+world between detections (``--entry-memory``). The first ``--baselines``
 episodes of each situation run again, the same placements and keys, going
 straight and with the privileged controller (the true side of the pipe):
 the lower and upper bounds of the bang-bang law. They read only the truth,
@@ -109,6 +110,10 @@ NEAR = True  # the lying pipes' near circle grid (`robots.snake.pipe_env.default
 # phase 0 for all, the lying entries of the default run were 148 / 122 of 256 (left / right), with it 125 / 127
 # (docs/BENCHMARKS.md).
 RANDOM_PHASE = True
+# The lying entry remembered in the world (`robots.snake.pipe_env.PipeEnv`'s ``entry_memory``, this weight) and
+# steered at to the end: on the first 32 lying placements a side 23 / 28 entered against 22 / 15 without
+# (docs/BENCHMARKS.md). 0: off.
+ENTRY_MEMORY = 0.3
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
@@ -399,6 +404,7 @@ def run(
     circle_bin: int = CIRCLE_BIN,
     near: bool = NEAR,
     random_phase: bool = RANDOM_PHASE,
+    entry_memory: float = ENTRY_MEMORY,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
@@ -409,7 +415,9 @@ def run(
     pixels a side (`CIRCLE_BIN`; 1: every pixel). ``near``: the lying pipes'
     circle grid extended for the last metre and their state machine to match
     (`NEAR`). ``random_phase``: each episode's gait starts at a phase drawn
-    from its key (`RANDOM_PHASE`); else all at phase 0.
+    from its key (`RANDOM_PHASE`); else all at phase 0. ``entry_memory``: the
+    lying entry's memory weight (`ENTRY_MEMORY`; 0: steer by each slot's
+    detection); with ``near`` only.
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -424,6 +432,8 @@ def run(
         raise UserError(f"--lead must be in [0, 2) m, got {lead}")
     if circle_bin not in (1, 2):
         raise UserError(f"--circle-bin must be 1 or 2, got {circle_bin}")
+    if not 0 <= entry_memory <= 1:
+        raise UserError(f"--entry-memory must be in [0, 1], got {entry_memory}")
     rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
@@ -468,6 +478,7 @@ def run(
                     max_steps=steps_for(env) * env.slot_steps,
                     vision=vision,
                     random_phase=random_phase,
+                    entry_memory=entry_memory if (lying and near) else 0.0,
                 )
                 for vision in (True, False)
             )
@@ -543,6 +554,14 @@ def _add_arguments(parser) -> None:
         "0, and a scene and its mirror image are different tasks)",
     )
     parser.add_argument(
+        "--entry-memory",
+        type=float,
+        default=ENTRY_MEMORY,
+        metavar="W",
+        help="with --near, remember a lying entry in the world (each detection from 0.3 m on moves it by this "
+        f"weight) and steer at it to the end (default {ENTRY_MEMORY}; 0: by each slot's detection)",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -573,6 +592,7 @@ def reproduce_command_run(
     circle_bin: int = CIRCLE_BIN,
     near: bool = NEAR,
     random_phase: bool = RANDOM_PHASE,
+    entry_memory: float = ENTRY_MEMORY,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -592,6 +612,7 @@ def reproduce_command_run(
             circle_bin=circle_bin,
             near=near,
             random_phase=random_phase,
+            entry_memory=entry_memory,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
