@@ -158,7 +158,10 @@ def machine_params(lying: bool, near: bool = False) -> ControllerParams:
     ``near``; with it, Alg. 3's offset and the blind stretch from 0.3 m 29 /
     33, from 0.4 m 20 / 20 (going straight blind is what fails: holding the
     last C does better), the camera frame with the stretch from 0.3 m 41 /
-    25, and with none 44 / 29.
+    25, and with none 44 / 29. It also steers at the entry the env remembers
+    (``memory``; `robots.snake.pipe_env.PipeEnv`'s ``entry_memory``), which
+    counts only where the env keeps one: on the first 32 placements a side
+    23 / 28 entered against 22 / 15 (random phases).
     """
     if lying and near:
         return ControllerParams(final_distance=0.0, lead=0.0, camera_frame=1.0, memory=1.0)
