@@ -270,7 +270,8 @@ class PipeEnv(Env):
             and its mirror image are the same task; at one fixed phase they
             are not (the snake's start differs, and so does every turn).
         entry_memory: the weight, in (0, 1], with which each entry detection
-            at Alg. 3's distance ``>= MEMORY_MIN_DEPTH`` moves the remembered
+            at the distance of Alg. 3 of the snake pipe-tracking paper
+            ``>= MEMORY_MIN_DEPTH`` moves the remembered
             entry (`remember_entry`: the detection placed in the world by the
             head camera's pose, an exponential average); 0 (default): none.
             ``info["mem_depth"]`` / ``info["mem_side"]`` give the remembered
@@ -608,7 +609,7 @@ _DVS_TAG = 0x44565321  # folded into the reset's key for the contrast DVS's mism
 
 
 MEMORY_MIN_DEPTH = 0.3
-"""Alg. 3's distance, m, below which an entry detection no longer moves the remembered entry: below it the ring
+"""The distance of Alg. 3 of the snake pipe-tracking paper, m, below which an entry detection no longer moves the remembered entry: below it the ring
 outgrows the near circle grid and its side is right in 54-81 % of the slots (against 86-96 % from 0.3 to 1.2 m)."""
 
 
