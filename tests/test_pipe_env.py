@@ -328,6 +328,8 @@ def _slot_state(seen: bool, control: float, d_est: float, offset: float | None =
         "d_est": jnp.float32(d_est),
         "offset_est": jnp.float32(offset),
         "side_est": jnp.float32(side),
+        "mem_ok": jnp.asarray(False),
+        "mem_side": jnp.float32(0.0),
     }
     return SimpleNamespace(info=info)
 

@@ -208,8 +208,8 @@ def _bang_bang_act(params: ControllerParams, cstate: ControllerState, state):
     own = (params.lead > 0) | camera
     steer = jnp.where(own, jnp.sign(offset + params.lead * side), slot.control.astype(jnp.float32))
     held = jnp.where(seen, steer, cstate.control)
-    remembered = ended & (params.memory > 0) & info.get("mem_ok", jnp.zeros((), bool))
-    held = jnp.where(remembered, jnp.sign(info.get("mem_side", jnp.zeros((), jnp.float32))), held)
+    remembered = ended & (params.memory > 0) & info["mem_ok"]
+    held = jnp.where(remembered, jnp.sign(info["mem_side"]), held)
     control = jnp.where(mode == APPROACH, held, 0.0)
     narrow = jnp.where(mode >= FINAL, params.narrow, 0.0)
     return ControllerState(mode, control, since, blind, side), _action(control, narrow)

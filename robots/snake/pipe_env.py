@@ -270,10 +270,10 @@ class PipeEnv(Env):
             and its mirror image are the same task; at one fixed phase they
             are not (the snake's start differs, and so does every turn).
         entry_memory: the weight, in (0, 1], with which each entry detection
-            at the distance of Alg. 3 of the snake pipe-tracking paper
-            ``>= MEMORY_MIN_DEPTH`` moves the remembered
-            entry (`remember_entry`: the detection placed in the world by the
-            head camera's pose, an exponential average); 0 (default): none.
+            at the distance of Alg. 3 of the snake pipe-tracking paper ``>=
+            MEMORY_MIN_DEPTH`` moves the remembered entry (`remember_entry`:
+            the detection placed in the world by the head camera's pose, an
+            exponential average); 0 (default): none.
             ``info["mem_depth"]`` / ``info["mem_side"]`` give the remembered
             entry in the camera's frame at every step, ``info["mem_ok"]``
             whether there is one; `robots.snake.pipe_controller`'s ``memory``
@@ -609,8 +609,9 @@ _DVS_TAG = 0x44565321  # folded into the reset's key for the contrast DVS's mism
 
 
 MEMORY_MIN_DEPTH = 0.3
-"""The distance of Alg. 3 of the snake pipe-tracking paper, m, below which an entry detection no longer moves the remembered entry: below it the ring
-outgrows the near circle grid and its side is right in 54-81 % of the slots (against 86-96 % from 0.3 to 1.2 m)."""
+"""The distance of Alg. 3 of the snake pipe-tracking paper, m, below which an entry detection no longer moves the
+remembered entry: below it the ring outgrows the near circle grid and its side is right in 54-81 % of the slots
+(against 86-96 % from 0.3 to 1.2 m)."""
 
 
 def remember_entry(mem, ok, seen, cam_pos, cam_rot, depth, side, weight):
