@@ -170,6 +170,26 @@ def test_failure_labels_take_the_first_cause_that_applies():
     assert names == [None, "never_detected", "missed_bore", "wrong_side", "overshoot", "lost", "timeout"]
 
 
+def test_detection_rate_counts_slots_in_view_and_the_rest_apart():
+    from robots.snake.reproduce_pipe import HEADER, summarize
+
+    # One episode of 4 slots (5 steps each) ending at step 18: slot ends 4, 9, 14 count, 19 does not.
+    # In view at 4 and 9; detections at 4, 14 (out of view) and 19 (after the end).
+    z = np.zeros((1, 20), np.float32)
+    detected, in_view = z.copy(), z.copy()
+    detected[0, [4, 14, 19]] = 1.0
+    in_view[0, [4, 9]] = 1.0
+    res = dict(
+        success=np.array([True]), reached=np.array([True]), end_step=np.array([18]), detected=detected,
+        in_view=in_view, d_est=z + 1.0, depth=z + 1.5, offset_est=z + 0.2, offset_true=z + 0.3,
+        action=z + 1.0,
+    )  # fmt: skip
+    row = dict(zip(HEADER, summarize("s", "bang-bang", res, False, 0.02, 5, 100)))
+    assert row["detection_rate"] == 0.5  # 1 of the 2 slots in view
+    assert row["out_of_view_share"] == 0.5  # 1 of the 2 detections that count
+    assert row["mean_distance_error_m"] == 0.5 and row["mean_time_to_success_s"] == 18 * 0.02
+
+
 def test_distance_table_bins_the_errors_by_true_depth_and_kind():
     from robots.snake.reproduce_pipe import DISTANCE_BINS, distance_rows
 

@@ -26,8 +26,11 @@ Writes, in ``--out DIR``:
   successes with the 95 % Wilson interval (standing: the head within 0.3 m of
   the surface; lying: the head in the bore), approaches (the head within 0.3 m
   of the pipe or its entry), mean time to success, mean |Eq. (8) distance -
-  true depth| at the detections, detection rate (slots with a detection among
-  slots with the pipe in view), steering-sign accuracy (the sign of Alg. 3's
+  true depth| at the detections, detection rate (the share of the slots
+  ending with the pipe's centre in the image's columns that have a
+  detection), the share of the detections made with it out of them (a
+  lying entry's ring still in view near the entry, or false positives),
+  steering-sign accuracy (the sign of Alg. 3's
   offset against the true offset from the central line, where that is at
   least 0.15 m), and every failure with one label (`LABELS`, first that
   applies): ``never_detected``; ``missed_bore`` (a lying pipe approached,
@@ -84,6 +87,7 @@ HEADER = [
     "mean_time_to_success_s",
     "mean_distance_error_m",
     "detection_rate",
+    "out_of_view_share",
     "sign_accuracy",
     *(f"fail_{label}" for label in LABELS),
 ]
@@ -306,7 +310,8 @@ def summarize(name, controller, res, lying: bool, dt: float, slot_steps: int, lo
         int(res["reached"].sum()),
         rate(time),
         rate(err) if vision else float("nan"),
-        float(used.sum() / max(view.sum(), 1)) if vision else float("nan"),
+        float((used & view).sum() / max(view.sum(), 1)) if vision else float("nan"),
+        float((used & ~view).sum() / max(used.sum(), 1)) if vision else float("nan"),
         rate(sign_ok) if vision else float("nan"),
         *(int((labels == i).sum()) for i in range(len(LABELS))),
     ]
