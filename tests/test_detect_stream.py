@@ -188,3 +188,27 @@ def test_circle_per_slot_is_one_sync_update_on_the_slots_events(both):
     assert fired_any
     with pytest.raises(UserError, match="circle_per_slot needs the synchronous mode"):
         stream.Tracker(detect.Detector(mode="async"), circle_per_slot=True)
+
+
+def test_a_skipped_circle_update_carries_the_slots_events_to_the_next(both):
+    """``slot_end(circle_update=False)``: no update and no entry; the next update takes both slots' events."""
+    tracker, _, ev, ts = both[:4]
+    det = detect.Detector(circle=tracker.detector.circle, line=None, sub_slots=2 * K)
+    alone = stream.Tracker(det, circle_per_slot=True)
+    params = stream.tracker_params(alone, track=pp.track_params(width=SIZE, speed=0.1))
+    step, end = jax.jit(stream.step, static_argnums=0), jax.jit(stream.slot_end, static_argnums=(0, 4))
+    state, ref = stream.init(alone), stream.init(alone).grids.circle
+    for s in range(SLOTS):
+        for j in range(K):
+            state = step(alone, params, state, jax.tree.map(lambda a: a[1, s, j], ev), ts[1][s, j])
+        state, out = end(alone, params, state, ts[1][s, -1], s % 2 == 1)
+        if s % 2 == 0:
+            assert not bool(out.entry.valid) and int(state.steps) == 0
+            np.testing.assert_array_equal(np.asarray(state.grids.circle.v), np.asarray(ref.v))
+        else:
+            pair = jax.tree.map(lambda a: a[1, s - 1 : s + 1].reshape(-1), ev)
+            ref, _ = hough.sync_step(params.detector.circle, det.circle, ref, pair, ts[1][s, -1])
+            np.testing.assert_array_equal(np.asarray(state.grids.circle.v), np.asarray(ref.v))
+    assert np.any(np.asarray(ref.v) != 0)
+    with pytest.raises(UserError, match="needs circle_per_slot and no line grid"):
+        stream.slot_end(tracker, both[1], stream.init(tracker), 0.0, False)

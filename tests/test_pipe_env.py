@@ -151,6 +151,15 @@ def test_bad_arguments_are_one_line_errors():
         pipe_env.PipeEnv(entry_memory=1.5)
     with pytest.raises(UserError, match="--entry-memory"):
         rp.run(None, 1, 1.0, entry_memory=-0.1)
+    with pytest.raises(UserError, match="circle_every > 1 needs"):
+        pipe_env.PipeEnv(circle_every=2)  # the standing pipes' line grid
+    with pytest.raises(UserError, match="circle_every must be"):
+        pipe_env.PipeEnv(circle_every=0)
+    every = pipe_env.PipeEnv(situation="lying-right", tracker=entry_only, circle_every=2)
+    with pytest.raises(UserError, match="whole groups of circle_every = 2 slots, not 3"):
+        pipe_env.rollout(every, pc.bang_bang, pc.ControllerParams(), jax.random.key(0), 3)
+    with pytest.raises(UserError, match="--circle-every"):
+        rp.run(None, 1, 1.0, circle_every=3)
 
 
 def test_failure_labels_take_the_first_cause_that_applies():

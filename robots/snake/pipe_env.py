@@ -278,6 +278,14 @@ class PipeEnv(Env):
             entry in the camera's frame at every step, ``info["mem_ok"]``
             whether there is one; `robots.snake.pipe_controller`'s ``memory``
             steers by it.
+        circle_every: the circle grid updates at every ``circle_every``-th
+            slot's end in `rollout` (on the events of the slots since its
+            last update; `spikejax.vision.stream.slot_end`'s
+            ``circle_update``), for a tracker with ``circle_per_slot`` and no
+            line grid; 1 (default): every slot. The other slot ends detect
+            nothing; the controller still acts at each (the remembered entry
+            steers there). `step` called without ``slot_end`` (Brax's call)
+            updates it every slot.
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
@@ -303,6 +311,7 @@ class PipeEnv(Env):
         vision: bool = True,
         random_phase: bool = False,
         entry_memory: float = 0.0,
+        circle_every: int = 1,
         **physics_kwargs: Any,
     ):
         if situation not in pipes.SITUATIONS:
@@ -352,6 +361,11 @@ class PipeEnv(Env):
         if not 0.0 <= entry_memory <= 1.0:
             raise UserError(f"entry_memory must be in [0, 1], got {entry_memory}")
         self.entry_memory = float(entry_memory)
+        if isinstance(circle_every, bool) or not isinstance(circle_every, int) or circle_every < 1:
+            raise UserError(f"circle_every must be a whole number of slots >= 1, got {circle_every!r}")
+        if circle_every > 1 and not (self.tracker.circle_per_slot and self.tracker.detector.line is None):
+            raise UserError("circle_every > 1 needs a tracker with the circle grid per slot and no line grid")
+        self.circle_every = circle_every
         self.gait = gait_params() if gait is None else gait
         self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
 
@@ -447,12 +461,14 @@ class PipeEnv(Env):
             info=info,
         )
 
-    def step(self, state: State, action: jax.Array, slot_end: bool | None = None) -> State:
+    def step(self, state: State, action: jax.Array, slot_end: bool | None = None, circle_update: bool = True) -> State:
         """One control step (see the module docstring).
 
         ``slot_end``: ``None`` (Brax's call) ends the detector's slot when it
         is due, decided per step; ``True`` / ``False`` (static) says whether
         this step ends a slot, for loops that know it (`rollout`).
+        ``circle_update`` (static, with ``slot_end=True``): ``False`` skips
+        the circle grid at this slot's end (``circle_every``).
         """
         action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
         info = dict(state.info)
@@ -485,7 +501,7 @@ class PipeEnv(Env):
                 tstate,
             )
         elif slot_end:
-            tstate, out = stream.slot_end(tr, tp, tstate, phys.time)
+            tstate, out = stream.slot_end(tr, tp, tstate, phys.time, circle_update)
             ended = jnp.ones((), bool)
         else:
             out, ended = stream.no_slot(tr, tstate, phys.time), jnp.zeros((), bool)
@@ -671,10 +687,10 @@ def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int
     act = controller[1]
     k = env.slot_steps
 
-    def one(carry, end):
+    def one(carry, end, circle_update=True):
         s, c = carry
         c, action = act(controller_params, c, s)
-        s = env.step(s, action, slot_end=end)
+        s = env.step(s, action, slot_end=end, circle_update=circle_update)
         rec = {
             "metrics": s.metrics,
             "done": s.done,
@@ -684,12 +700,22 @@ def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int
         }
         return (s, c), rec
 
-    def slot(carry, _):
-        carry, inner = jax.lax.scan(lambda c, _: one(c, False), carry, None, length=k - 1)
-        carry, last = one(carry, True)
-        rec = jax.tree.map(lambda a, b: jnp.concatenate([a, b[None]]), inner, last)
-        return carry, rec
+    every = env.circle_every
+    if slots % every:
+        raise UserError(f"rollout_slots runs whole groups of circle_every = {every} slots, not {slots}")
 
-    carry, record = jax.lax.scan(slot, carry, None, length=slots)
+    def slot(carry, circle_update):
+        carry, inner = jax.lax.scan(lambda c, _: one(c, False), carry, None, length=k - 1)
+        carry, last = one(carry, True, circle_update)
+        return carry, jax.tree.map(lambda a, b: jnp.concatenate([a, b[None]]), inner, last)
+
+    def group(carry, _):  # the circle grid updates at the group's last slot end (static)
+        recs = []
+        for i in range(every):
+            carry, rec = slot(carry, i == every - 1)
+            recs.append(rec)
+        return carry, jax.tree.map(lambda *a: jnp.concatenate(a), *recs)
+
+    carry, record = jax.lax.scan(group, carry, None, length=slots // every)
     record = jax.tree.map(lambda a: a.reshape((slots * k,) + a.shape[2:]), record)
     return carry, record

@@ -11,7 +11,8 @@ with the line grid, lying ones with the reduced circle grid alone, as the
 paper detects them (`robots.snake.pipe_env.default_tracker`), the lying
 ones' grid extended for the last metre and steered by to the end (``--near``,
 `robots.snake.pipe_controller.machine_params`), the entry remembered in the
-world between detections (``--entry-memory``). The first ``--baselines``
+world between detections (``--entry-memory``) and the circle grid updated
+every ``--circle-every`` slots. The first ``--baselines``
 episodes of each situation run again, the same placements and keys, going
 straight and with the privileged controller (the true side of the pipe):
 the lower and upper bounds of the bang-bang law. They read only the truth,
@@ -118,6 +119,11 @@ RANDOM_PHASE = True
 # steered at to the end: on the first 32 lying placements a side 23 / 28 entered against 22 / 15 without
 # (docs/BENCHMARKS.md). 0: off.
 ENTRY_MEMORY = 0.3
+# The lying pipes' circle grid updates every CIRCLE_EVERY slots (`robots.snake.pipe_env.PipeEnv`'s
+# ``circle_every``), the remembered entry steering between: on the 32 lying placements a side of
+# ``--episodes 32`` the same 26 / 25 entered as with every slot, in 161-171 s of one core against about 330
+# (docs/BENCHMARKS.md).
+CIRCLE_EVERY = 2
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
@@ -410,6 +416,7 @@ def run(
     near: bool = NEAR,
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
+    circle_every: int = CIRCLE_EVERY,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
@@ -422,7 +429,9 @@ def run(
     (`NEAR`). ``random_phase``: each episode's gait starts at a phase drawn
     from its key (`RANDOM_PHASE`); else all at phase 0. ``entry_memory``: the
     lying entry's memory weight (`ENTRY_MEMORY`; 0: steer by each slot's
-    detection); with ``near`` only.
+    detection); with ``near`` only. ``circle_every``: the lying pipes'
+    circle grid updates every that many slots (`CIRCLE_EVERY`; a divisor of
+    `SEGMENT`; 1: every slot).
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -439,6 +448,13 @@ def run(
         raise UserError(f"--circle-bin must be 1 or 2, got {circle_bin}")
     if not 0 <= entry_memory <= 1:
         raise UserError(f"--entry-memory must be in [0, 1], got {entry_memory}")
+    if (
+        isinstance(circle_every, bool)
+        or not isinstance(circle_every, int)
+        or circle_every < 1
+        or SEGMENT % circle_every
+    ):
+        raise UserError(f"--circle-every must be a whole number of slots dividing {SEGMENT}, got {circle_every}")
     rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
@@ -484,6 +500,7 @@ def run(
                     vision=vision,
                     random_phase=random_phase,
                     entry_memory=entry_memory if (lying and near) else 0.0,
+                    circle_every=circle_every if lying else 1,
                 )
                 for vision in (True, False)
             )
@@ -567,6 +584,14 @@ def _add_arguments(parser) -> None:
         f"weight) and steer at it to the end (default {ENTRY_MEMORY}; 0: by each slot's detection)",
     )
     parser.add_argument(
+        "--circle-every",
+        type=int,
+        default=CIRCLE_EVERY,
+        metavar="N",
+        help=f"update the lying pipes' circle grid every N slots, on their events (default {CIRCLE_EVERY}; 1: every "
+        f"slot; N divides {SEGMENT})",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -598,6 +623,7 @@ def reproduce_command_run(
     near: bool = NEAR,
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
+    circle_every: int = CIRCLE_EVERY,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -618,6 +644,7 @@ def reproduce_command_run(
             near=near,
             random_phase=random_phase,
             entry_memory=entry_memory,
+            circle_every=circle_every,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")

@@ -340,7 +340,9 @@ def due(params: TrackerParams, state: TrackerState) -> jax.Array:
     return state.steps >= params.slot_steps
 
 
-def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) -> tuple[TrackerState, SlotOutput]:
+def slot_end(
+    tracker: Tracker, params: TrackerParams, state: TrackerState, t, circle_update: bool = True
+) -> tuple[TrackerState, SlotOutput]:
     """The slot's end: Alg. 2 on its tallies, Alg. 3 on the detections, the control; a new slot begins.
 
     Args:
@@ -348,21 +350,32 @@ def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) ->
         params: traced parameters.
         state: after the slot's steps.
         t: the slot's time stamp for the detections, s (its last step's end).
+        circle_update: static; ``False`` skips the circle grid at this slot's
+            end (a tracker with ``circle_per_slot`` and no line grid): no
+            update, no entry (Alg. 3 sees no detection), and the slot's event
+            image carries over, so the next update takes both slots' events.
 
     Returns:
         ``(state, output)``: the state with empty slot tallies (the grids and
         Alg. 3's histories carried on), and the `SlotOutput`.
     """
     det = tracker.detector
+    skip = not circle_update
+    if skip and not (tracker.circle_per_slot and det.line is None):
+        raise UserError("skipping the circle grid at a slot's end needs circle_per_slot and no line grid")
     circle, circle_counts, circle_votes = state.grids.circle, state.circle_counts, state.circle_votes
-    if det.circle is not None and _image_is_circle_sensor(det):
+    if det.circle is not None and _image_is_circle_sensor(det) and not skip:
         circle_votes = hough.circle_image_votes(det.circle, detect.circle_image(det, state.image[0] + state.image[1]))
-    if tracker.circle_per_slot:
+    if tracker.circle_per_slot and not skip:
         signed = hough.circle_image_votes(det.circle, detect.circle_image(det, state.image[0] - state.image[1]))
         circle, spikes = hough.sync_update(params.detector.circle, circle, signed, t)
         circle_counts = (spikes != 0).astype(jnp.float32)
     evidence = detect.Evidence(state.line_spikes, state.line_votes, circle_counts, circle_votes, state.image)
-    body, entry = detect.find_pipes(det, params.detector, evidence, t)
+    if skip:
+        stamp = jnp.asarray(t, jnp.float32)
+        body, entry = (pp.Pipe(stamp, *detect._empty_pipe(kind)[1:]) for kind in (pp.BODY, pp.ENTRY))
+    else:
+        body, entry = detect.find_pipes(det, params.detector, evidence, t)
     angle = pp.mean_filter(state.angles, state.samples)
     velocity = pp.mean_filter(state.velocities, state.samples)
     body_track, body_est = pp.track_step(params.track, state.body_track, body, angle, velocity)
@@ -377,6 +390,7 @@ def slot_end(tracker: Tracker, params: TrackerParams, state: TrackerState, t) ->
     misses = jnp.where(seen, 0, state.misses + 1)
     control = jnp.where(seen, control, jnp.where(misses <= params.hold, state.control, 0)).astype(jnp.int32)
     line_spikes, line_votes, circle_counts, circle_votes, image = _slot_tallies(det)
+    image = state.image if skip else image
     new = state._replace(
         grids=detect.DetectorState(state.grids.line, circle),
         line_spikes=line_spikes,
