@@ -121,8 +121,8 @@ RANDOM_PHASE = True
 ENTRY_MEMORY = 0.3
 # The lying pipes' circle grid updates every CIRCLE_EVERY slots (`robots.snake.pipe_env.PipeEnv`'s
 # ``circle_every``), the remembered entry steering between: on the 32 lying placements a side of
-# ``--episodes 32`` the same 26 / 25 entered as with every slot, in 161-171 s of one core against about 330
-# (docs/BENCHMARKS.md).
+# ``--episodes 32`` the same 26 / 25 entered as with every slot, 164.5 against 220.8 s a side on one core; on
+# 256 a side 378 against 390 of 512 (docs/BENCHMARKS.md).
 CIRCLE_EVERY = 2
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
