@@ -10,6 +10,7 @@ nbclient = pytest.importorskip("nbclient")
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 
 
+@pytest.mark.slow  # 30 s (kernel, imports, both grids compiled): the fast suite is at its 15-minute limit; the gaits notebook stays in it
 def test_hough_notebook_executes(monkeypatch):
     monkeypatch.setenv("SPIKEJAX_NB_HOUGH_FRAMES", "11")
     nb = nbformat.read(NOTEBOOKS / "hough.ipynb", as_version=4)

@@ -10,6 +10,7 @@ nbclient = pytest.importorskip("nbclient")
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 
 
+@pytest.mark.slow  # 21 s (kernel, the env and its camera compiled): the fast suite is at its 15-minute limit; the gaits notebook stays in it
 def test_snake_notebook_executes(monkeypatch):
     monkeypatch.setenv("SPIKEJAX_NB_SNAKE_STEPS", "40")
     monkeypatch.setenv("SPIKEJAX_NB_SNAKE_PERIODS", "3")
