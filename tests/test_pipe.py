@@ -266,6 +266,22 @@ def test_smoothing_takes_the_median_of_recent_distances_brought_forward():
     np.testing.assert_array_equal(np.asarray(state2.distance), np.asarray(state.distance))
 
 
+def test_the_pooled_distances_are_the_last_pool_detections_whatever_eq9s_interval():
+    """``pool`` sizes the distances' ring apart from Eq. (9)'s ``interval``: the same median with an interval of 2."""
+    f = float(pp.track_params().focal)
+    params = pp.track_params(size=0.25, speed=0.0, smooth=10.0)
+    distances, times = (2.0, 2.6, 1.9, 1.8, 3.0), (0.0, 1.0, 2.0, 3.0, 4.0)
+    for interval, pool, expected in ((2, 3, [2.0, 2.3, 2.0, 1.9, 1.9]), (10, 3, [2.0, 2.3, 2.0, 1.9, 1.9]),
+                                     (2, 5, [2.0, 2.3, 2.0, 1.95, 2.0])):  # fmt: skip
+        state, out = pp.track_init(interval, pool), []
+        for t, d in zip(times, distances):
+            state, est = pp.track_step(params, state, _pipe(t, f * 0.25 / d, 64.0), 0.0, 0.0)
+            out.append(float(est.distance))
+        # The medians by hand: (2.6, 1.9, 1.8) -> 1.9, (1.9, 1.8, 3.0) -> 1.9; all five: 2.0.
+        np.testing.assert_allclose(out, expected, rtol=1e-5)
+        assert state.t.shape == (interval,) and state.distance.shape == (pool,)
+
+
 def test_track_vmaps_over_streams():
     t, _, width = _approach(12)
     ones = jnp.ones(12)

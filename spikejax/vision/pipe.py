@@ -665,9 +665,9 @@ class TrackParams(NamedTuple):
             times ``cos b``; a swinging head camera sees the pipe 10-25
             degrees aside, 2-10 % short.
         smooth: seconds over which Eq. (8)'s distances are pooled, 0 (the
-            paper) for none: the median of the last ``interval`` detections'
-            distances within ``smooth`` s, each brought forward by
-            ``speed`` times its age (the robot's approach since).
+            paper) for none: the median of the last ``pool`` detections'
+            distances (`track_init`) within ``smooth`` s, each brought
+            forward by ``speed`` times its age (the robot's approach since).
     """
 
     focal: jax.Array
@@ -720,12 +720,14 @@ def track_params(
 
 
 class TrackState(NamedTuple):
-    """The last ``interval`` detections' times, widths and Eq. (8) distances (a ring), and how many there were."""
+    """The last ``interval`` detections' times and widths (Eq. 9), the last ``pool`` ones' times and Eq. (8)
+    distances (``smooth``), each a ring, and how many detections there were."""
 
     t: jax.Array  # (interval,) s
     width: jax.Array  # (interval,) pixels
     count: jax.Array  # () int32, valid detections so far
-    distance: jax.Array  # (interval,) m, Eq. (8) (off-axis corrected when asked), for ``smooth``
+    distance: jax.Array  # (pool,) m, Eq. (8) (off-axis corrected when asked), for ``smooth``
+    pool_t: jax.Array  # (pool,) s, the times of ``distance``
 
 
 class Estimate(NamedTuple):
@@ -739,10 +741,11 @@ class Estimate(NamedTuple):
     valid: jax.Array
 
 
-def track_init(interval: int = 10) -> TrackState:
-    """An empty history for Eq. (9) over ``interval`` detections (10 in the paper)."""
-    z = jnp.zeros((interval,), jnp.float32)
-    return TrackState(z, z, jnp.zeros((), jnp.int32), z)
+def track_init(interval: int = 10, pool: int = 10) -> TrackState:
+    """An empty history for Eq. (9) over ``interval`` detections (10 in the paper) and for pooling the last
+    ``pool`` detections' distances (`TrackParams.smooth`)."""
+    z, zp = jnp.zeros((interval,), jnp.float32), jnp.zeros((pool,), jnp.float32)
+    return TrackState(z, z, jnp.zeros((), jnp.int32), zp, zp)
 
 
 def track_step(
@@ -768,16 +771,16 @@ def track_step(
     Returns:
         ``(state, estimate)``.
     """
-    interval = state.t.shape[0]
-    slot = state.count % interval
+    interval, pool = state.t.shape[0], state.distance.shape[0]
+    slot, pool_slot = state.count % interval, state.count % pool
     known = params.size > 0
     d_known = distance_from_size(pipe.width, params.focal, jnp.where(known, params.size, 0.0))
     bearing = (pipe.pos - params.center) / params.focal  # tan b
     d_known = d_known * jnp.where(params.off_axis > 0, jnp.sqrt(1.0 + bearing * bearing), 1.0)
-    d_ring = jnp.where(pipe.valid, state.distance.at[slot].set(d_known), state.distance)
-    t_ring = jnp.where(pipe.valid, state.t.at[slot].set(pipe.t), state.t)
-    age = pipe.t - t_ring
-    present = (jnp.arange(interval) < state.count + 1) & (age <= params.smooth) & (d_ring > 0)
+    d_ring = jnp.where(pipe.valid, state.distance.at[pool_slot].set(d_known), state.distance)
+    pool_t = jnp.where(pipe.valid, state.pool_t.at[pool_slot].set(pipe.t), state.pool_t)
+    age = pipe.t - pool_t
+    present = (jnp.arange(pool) < state.count + 1) & (age <= params.smooth) & (d_ring > 0)
     pooled = jnp.nanmedian(jnp.where(present, d_ring - params.speed * age, jnp.nan))
     d_known = jnp.where((params.smooth > 0) & jnp.any(present), pooled, d_known)
     d_grown = distance_from_expansion(state.width[slot], pipe.width, pipe.t - state.t[slot], params.speed)
@@ -798,10 +801,11 @@ def track_step(
         valid=pipe.valid,
     )
     new = TrackState(
-        t=t_ring,
+        t=jnp.where(pipe.valid, state.t.at[slot].set(pipe.t), state.t),
         width=jnp.where(pipe.valid, state.width.at[slot].set(pipe.width), state.width),
         count=state.count + pipe.valid.astype(jnp.int32),
         distance=d_ring,
+        pool_t=pool_t,
     )
     return new, estimate
 

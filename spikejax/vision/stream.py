@@ -92,6 +92,8 @@ class Tracker:
             and ``sub_slots``: the most control steps a slot may have (the
             size of the slot's spike buffer).
         interval: Alg. 3's Eq. (9) interval, detections (10 in the paper).
+        pool: how many of the last detections' distances Alg. 3 pools
+            (`spikejax.vision.pipe.TrackParams.smooth`).
         window: the mean filter's window on the head joint's angle and
             velocity, control steps (1: no filter).
         target: which detection steers: ``"body"``, ``"entry"`` or ``"any"``
@@ -106,6 +108,7 @@ class Tracker:
 
     detector: detect.Detector = detect.Detector()
     interval: int = 10
+    pool: int = 10
     window: int = 1
     target: str = "any"
     circle_per_slot: bool = False
@@ -117,7 +120,7 @@ class Tracker:
             raise UserError("circle_per_slot needs the synchronous mode (the asynchronous grid updates per event)")
         if self.circle_per_slot and (self.detector.circle is None or not _image_is_circle_sensor(self.detector)):
             raise UserError("circle_per_slot needs a circle grid on the same sensor as the slot's event images")
-        for name in ("interval", "window"):
+        for name in ("interval", "pool", "window"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise UserError(f"Tracker.{name} must be a positive integer, not {value!r}")
@@ -255,8 +258,8 @@ def init(tracker: Tracker, t0=0.0) -> TrackerState:
     zi = jnp.zeros((), jnp.int32)
     ring = jnp.zeros((tracker.window,), jnp.float32)
     return TrackerState(
-        grids, *_slot_tallies(det), zi, ring, ring, zi, pp.track_init(tracker.interval),
-        pp.track_init(tracker.interval), zi, zi,
+        grids, *_slot_tallies(det), zi, ring, ring, zi, pp.track_init(tracker.interval, tracker.pool),
+        pp.track_init(tracker.interval, tracker.pool), zi, zi,
     )  # fmt: skip
 
 
