@@ -141,7 +141,7 @@ grid; `PipeEnv` the smoothing of its pipe's kind).
 
 The body: every detection of the last 2 s (20 slots) instead of the last 10 within 3 s. On the default
 standing run (256 placements a side) the mean |d_est - depth| over 0.5-3 m falls from 0.102 / 0.103 m to
-0.099 / 0.100 m, every 0.5 m bin lower, standing-left 255 / 256 reached both ways, standing-right 248 against
+0.099 / 0.100 m, each 0.5 m bin of those lower, standing-left 255 / 256 reached both ways, standing-right 248 against
 250 / 256; the detections of too narrow pairs, 12 % of them, come when the pipe sweeps across the image faster
 than 3 px a step (30 % of those against 7 %), clustered in the head's swing, and more of them are outvoted.
 The entry keeps 10 within 3 s: pooling 20 over 2 s reads 0.216 against 0.213 m offline on 16 lying-right
