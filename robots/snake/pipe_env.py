@@ -135,9 +135,9 @@ pipe loop: the reproduction")."""
 
 
 DISTANCE_POOLING = {"body": (20, 2.0), "entry": (10, 3.0)}
-"""What Alg. 3 pools per detected kind: ``(detections, seconds)``, `spikejax.vision.stream.Tracker`'s ``pool``
-and `spikejax.vision.pipe.TrackParams`'s ``smooth`` (`default_tracker` takes the body's when it runs the line
-grid; `PipeEnv` the smoothing of its pipe's kind).
+"""What Alg. 3 of the snake pipe-tracking paper pools per detected kind: ``(detections, seconds)``,
+`spikejax.vision.stream.Tracker`'s ``pool`` and `spikejax.vision.pipe.TrackParams`'s ``smooth``
+(`default_tracker` takes the body's when it runs the line grid; `PipeEnv` the smoothing of its pipe's kind).
 
 The body: every detection of the last 2 s (20 slots) instead of the last 10 within 3 s. On the default
 standing run (256 placements a side) the mean |d_est - depth| over 0.5-3 m falls from 0.102 / 0.103 m to
