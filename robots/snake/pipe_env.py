@@ -120,9 +120,9 @@ against the floor) or 3 levels (against the sky); the largest contrast, a bore o
 DVS's events (852 against 288 a step over 16 standing-pipe episodes of 30 s, docs/BENCHMARKS.md)."""
 
 
-DISTANCE_REFINEMENTS = dict(off_axis=True, smooth=3.0, speed=SNAKE_SPEED)
+DISTANCE_REFINEMENTS = dict(off_axis=True, speed=SNAKE_SPEED)
 """Alg. 3's Eq. (8) in the loop, beyond the snake pipe-tracking paper (`spikejax.vision.pipe.TrackParams`);
-a standing pipe's body pools as `DISTANCE_POOLING` says.
+how long it pools (``smooth``) is `DISTANCE_POOLING`'s, per kind of pipe.
 
 The distance divided by the cosine of the pipe's bearing, and the median of the
 last 10 detections' distances within 3 s, each brought forward by the snake's
@@ -370,7 +370,8 @@ class PipeEnv(Env):
                 size=size,
                 width=cam.HEAD_CAMERA.width,
                 fov=cam.HEAD_CAMERA.fov,
-                **{**DISTANCE_REFINEMENTS, "smooth": smooth},
+                smooth=smooth,
+                **DISTANCE_REFINEMENTS,
             )
             tracker_params = stream.tracker_params(self.tracker, track=track)
         self.tracker_params = tracker_params
