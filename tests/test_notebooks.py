@@ -25,6 +25,7 @@ def _figures(outputs: list) -> int:
     return sum(o.output_type == "display_data" for o in outputs)
 
 
+@pytest.mark.slow  # 27 s; the command it calls is test_reproduce_gaits.py's, in the fast suite
 def test_gaits_notebook_executes(tmp_path, monkeypatch):
     monkeypatch.setenv("SPIKEJAX_RESULTS", str(tmp_path / "gaits"))
     monkeypatch.setenv("SPIKEJAX_NB_TRIALS", "40")

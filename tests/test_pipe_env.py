@@ -261,45 +261,10 @@ def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
         assert next(csv.reader(f)) == DISTANCE_HEADER
 
 
-def test_each_controllers_episodes_are_cut_in_contiguous_shares_one_a_worker():
-    from robots.snake import reproduce_pipe as rp
-
-    keys = jax.random.split(jax.random.key(1), 5)
-    scenes = jax.vmap(lambda k: pipes.sample(k, pipes.STANDING, pipes.LEFT))(keys)
-    build = dict(where=dict(situation="standing-left"), lying=False)
-    shares = rp._shares_of(build, scenes, keys, 10, pc.ControllerParams(), 3, 2, 1)
-    assert [(s.controller, len(s.key_data)) for s in shares] == [
-        ("bang-bang", 3),
-        ("bang-bang", 2),
-        ("straight", 2),
-        ("straight", 1),
-        ("privileged", 2),
-        ("privileged", 1),
-    ]
-    np.testing.assert_array_equal(np.concatenate([s.key_data for s in shares[:2]]), jax.random.key_data(keys))
-    np.testing.assert_array_equal(np.concatenate([s.scenes.xy for s in shares[2:4]]), scenes.xy[:3])
-    assert [int(s.params.which[0]) for s in shares[::2]] == [pc.CONTROLLERS[c] for c in rp.CONTROLLERS]
-
-
-@pytest.mark.slow  # about 60 s: each worker process compiles the loop
-def test_two_workers_write_the_tables_of_one_process(tmp_path):
-    from robots.snake import reproduce_pipe as rp
-
-    scene = tmp_path / "scene.toml"
-    scene.write_text(
-        '[snake]\nx = 0.0\ny = 0.0\nyaw_deg = 0.0\n\n[[pipe]]\nkind = "standing"\nx = 1.0\ny = -0.3\n'
-        "radius = 0.125\nlength = 2.0\n"
-    )
-    for w in (1, 2):
-        (tmp_path / str(w)).mkdir()
-        rp.run(tmp_path / str(w), 3, 3.0, str(scene), progress=False, baselines=3, workers=w)
-    for name in ("snake_pipe.csv", "snake_pipe_distance.csv"):
-        assert (tmp_path / "1" / name).read_bytes() == (tmp_path / "2" / name).read_bytes(), name
-
-
 @pytest.mark.slow  # about 40 s: two batch shapes compiled
 def test_refilled_lanes_give_each_episode_the_trial_it_gets_alone(monkeypatch):
-    """`reproduce_pipe._episodes` restarts a finished lane with the next episode: nothing about an episode changes."""
+    """`reproduce_pipe._episodes` restarts a finished lane with the next episode, and runs a lone episode beside its
+    copy: nothing about an episode changes."""
     from robots.snake import reproduce_pipe as rp
 
     monkeypatch.setattr(rp, "SEGMENT", 4)  # slots a batch runs between refills
@@ -313,10 +278,13 @@ def test_refilled_lanes_give_each_episode_the_trial_it_gets_alone(monkeypatch):
     params = rp._switch_params(pc.ControllerParams(), "bang-bang", 3)
     refilled = rp._episodes(env, scenes, keys, slots, params, False, "", size=2)
     alone = rp._episodes(env, scenes, keys, slots, params, False, "", size=3)
+    first = jax.tree.map(lambda a: a[1:2], (scenes, keys, params))  # alone in the run: beside its copy
+    lone = rp._episodes(env, first[0], first[1], slots, first[2], False, "", size=1)
     assert refilled["end_step"][0] <= 4 * 5 and refilled["success"][0]
     assert list(refilled["end_step"][1:]) == [slots * 5] * 2  # the others run to the end
     for name in alone:
         np.testing.assert_array_equal(refilled[name], alone[name], err_msg=name)
+        np.testing.assert_array_equal(lone[name], alone[name][1:2], err_msg=name)
 
 
 def test_action_1_narrows_the_gaits_lateral_amplitude_only():

@@ -54,10 +54,7 @@ mode on frame differences, paired episode by episode
 
 Defaults: 256 episodes per situation of 60 s each (at about 0.1 m/s the
 farthest starts, 4 m, need 40 s straight), 64 of them with the baselines;
-each situation's episodes in shares run by one process a core
-(``--workers``, `spikejax.workers.pool`: where MuJoCo C steps the physics
-through a host callback, two processes run a batch faster than two CPU
-devices of one process).
+each batch split over one CPU device a core (``--cpu-devices``).
 Timings and results: docs/BENCHMARKS.md, "Snake pipe loop".
 """
 
@@ -65,10 +62,7 @@ from __future__ import annotations
 
 import argparse
 import functools
-import hashlib
-import pickle
 from pathlib import Path
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -131,10 +125,10 @@ ENTRY_MEMORY = 0.3
 # 256 a side 378 against 390 of 512 (docs/BENCHMARKS.md).
 CIRCLE_EVERY = 2
 MIN_LANES = 2
-"""The fewest lanes `_episodes` runs: XLA compiles a batch of one lane (its axis of size 1 folded away) to other
-floating-point rounding than wider ones, and the closed loop makes the difference a different trial (measured: a
-standing episode's head moved apart from step 5). From two lanes on, an episode's trial does not depend on the
-batch (tested), so a lone episode runs beside its copy."""
+"""The fewest lanes `_episodes` runs on a device: XLA compiles a batch of one lane (its axis of size 1 folded away)
+to other floating-point rounding than wider ones, and the closed loop makes the difference another trial (measured:
+a standing episode's head moved apart from step 5). From two lanes on an episode's trial does not depend on the batch
+(tested), so a run of fewer episodes fills the lanes with copies of them."""
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
 SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
 
@@ -179,9 +173,7 @@ def _programs(env, devices: int = 1):
     return start, segment
 
 
-def _episodes(
-    env, scenes, keys, slots, params, progress: bool, desc: str, size: int = CHUNK, devices: int = 1, on_done=None
-):
+def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size: int = CHUNK, devices: int = 1):
     """Each episode of ``keys`` / ``scenes`` for ``slots`` slots, ``size`` lanes at a time, with `robots.snake.pipe_controller.switch`.
 
     One batch of ``size`` lanes (one compile) runs ``SEGMENT`` slots at a
@@ -194,8 +186,7 @@ def _episodes(
     refilling changes no result, and the batch never waits for its slowest
     episode. A finished episode's record is padded to the run's length
     (outcomes and positions held, detections and actions 0), as it is never
-    read past its end. ``on_done(1)``, if given, is called for each finished
-    episode instead of the progress bar's update.
+    read past its end.
     """
     from tqdm import tqdm
 
@@ -216,13 +207,12 @@ def _episodes(
     steps = slots * env.slot_steps
     n = keys.shape[0]
     pick = lambda tree, idx: jax.tree.map(lambda a: a[idx], tree)  # noqa: E731
-    if n == 1:  # a lone episode runs beside its copy: see `MIN_LANES`
-        twice = np.zeros(MIN_LANES, int)
-        res = _episodes(env, pick(scenes, twice), keys[twice], slots, pick(params, twice), False, "", 2, devices, id)
-        if on_done is not None:
-            on_done(1)
-        return pick(res, slice(0, 1))
-    size = max(MIN_LANES, min(size, n))
+    lanes = MIN_LANES * devices
+    if n < lanes:  # too few episodes for MIN_LANES a device: copies run beside them
+        fill = np.arange(lanes) % n
+        res = _episodes(env, pick(scenes, fill), keys[fill], slots, pick(params, fill), progress, desc, lanes, devices)
+        return pick(res, slice(0, n))
+    size = max(lanes, min(size, n))
     lane = np.arange(size)  # the episode each lane runs
     queue = size  # the next episode to start
     carry = start(keys[lane], pick(scenes, lane))
@@ -231,8 +221,7 @@ def _episodes(
     ran = np.zeros(size, int)  # slots each lane's episode has run
     live = np.ones(size, bool)
     results: dict[int, dict] = {}
-    bar = tqdm(total=n, desc=desc, disable=not progress or on_done is not None, unit="episode")
-    done = on_done or bar.update
+    bar = tqdm(total=n, desc=desc, disable=not progress, unit="episode")
     while live.any():
         carry, record = segment(carry, lane_params)
         record = jax.tree.map(
@@ -249,7 +238,7 @@ def _episodes(
                 out[k] = _pad(rec[k][None], steps, k != "action")[0]
             results[int(lane[i])] = out
             parts[i] = []
-            done(1)
+            bar.update(1)
         fresh = np.zeros(size, bool)
         for i in np.flatnonzero(finished):
             if queue < n:
@@ -397,137 +386,30 @@ def _switch_params(machine, controller: str, n: int):
     return jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (n,)), params)
 
 
-CONTROLLERS = ("bang-bang", "straight", "privileged")
-_ENVS: dict = {}  # this process's (env, blind) pairs by their `_make_envs` keywords: one compile per env and process
+def _conditions(name, envs, scenes, keys, slots, machine, baselines: int, progress: bool, devices: int = 1):
+    """The spiking controller on every episode, the baselines on the first ``baselines``: ``[(label, res, scenes)]``.
 
-
-class _Share(NamedTuple):
-    """A contiguous slice of one situation's episodes under one controller, as a worker runs it (host arrays)."""
-
-    build: dict  # `_make_envs`'s keywords
-    controller: str  # one of `CONTROLLERS`: the first runs in the env with the camera, the others in its blind twin
-    scenes: object  # `robots.snake.pipes.PipeScene`, leaves ``(n, ...)``
-    key_data: np.ndarray  # the episodes' keys, `jax.random.key_data`
-    slots: int
-    params: object  # `robots.snake.pipe_controller.SwitchParams`, leaves ``(n,)``
-    size: int  # lanes
-    devices: int
-
-
-def _make_envs(where, lying, seconds, circle_bin, near, random_phase, entry_memory, circle_every):
-    """``(env, blind)``: the spiking controller's `robots.snake.pipe_env.PipeEnv` and its twin without the camera.
-
-    The baselines read only the truth, so they run in the blind twin
-    (``vision=False``: the same physics step for step, at a fifth of the cost).
+    ``envs`` is ``(env, blind)``: the spiking controller runs in ``env``, the
+    baselines, which read only the truth, in its twin without the camera and
+    detector (``vision=False``: the same physics step for step, at a fifth
+    of the cost).
     """
-    from robots.snake import pipe_env
-
-    where = {k: jax.tree.map(jnp.asarray, v) if k == "scene" else v for k, v in where.items()}
-    tracker = pipe_env.default_tracker(
-        circle=lying, line=not lying, circle_bin=circle_bin if lying else 1, near=near and lying
-    )
-    env = pipe_env.PipeEnv(**where, tracker=tracker)
-    slots = _slots_for(env, seconds)
-    return tuple(
-        pipe_env.PipeEnv(
-            **where,
-            tracker=tracker,
-            max_steps=slots * env.slot_steps,
-            vision=vision,
-            random_phase=random_phase,
-            entry_memory=entry_memory if (lying and near) else 0.0,
-            circle_every=circle_every if lying else 1,
-        )
-        for vision in (True, False)
-    )
-
-
-def _slots_for(env, seconds: float) -> int:
-    return max(1, int(round(seconds / env.dt / env.slot_steps)))
-
-
-def _envs(build: dict):
-    key = hashlib.sha256(pickle.dumps(build)).hexdigest()
-    if key not in _ENVS:
-        _ENVS[key] = _make_envs(**build)
-    return _ENVS[key]
-
-
-def _run_share(share: _Share, on_done=None) -> dict:
-    """`_episodes` on one share, in this process: its results as host arrays."""
-    if share.devices > 1:
-        from spikejax.devices import use_cpu_devices
-
-        use_cpu_devices(share.devices)
-    env = _envs(share.build)[share.controller != "bang-bang"]
-    keys = jax.random.wrap_key_data(jnp.asarray(share.key_data))
-    scenes = jax.tree.map(jnp.asarray, share.scenes)
-    params = jax.tree.map(jnp.asarray, share.params)
-    return _episodes(env, scenes, keys, share.slots, params, False, "", share.size, share.devices, on_done)
-
-
-def _share_in_worker(queue, share: _Share) -> dict:
-    return _run_share(share, on_done=queue.put)
-
-
-def _run_shares(shares: list[_Share], workers: int, progress: bool) -> list[dict]:
-    """Every share's results, in order: in this process (``workers`` 1) or on a pool of one process a core.
-
-    The most expensive shares (the camera's, the lying pipes' first) go first
-    so that the pool's processes finish together. Results do not depend on
-    ``workers``: a share is a slice of episodes, and an episode's trial does
-    not depend on the batch it runs in.
-    """
-    from tqdm import tqdm
-
-    from spikejax import workers as pools
-
-    bar = tqdm(total=sum(len(s.key_data) for s in shares), desc="snake-pipe", disable=not progress, unit="episode")
-    try:
-        if workers == 1:
-            return [_run_share(s, on_done=bar.update) for s in shares]
-        import multiprocessing
-        import queue as queues
-
-        cost = lambda i: (shares[i].controller != "bang-bang", not shares[i].build["lying"])  # noqa: E731
-        order = sorted(range(len(shares)), key=cost)
-        with pools.pool(workers) as executor, multiprocessing.get_context("spawn").Manager() as manager:
-            q = manager.Queue()
-            futures = {i: executor.submit(_share_in_worker, q, shares[i]) for i in order}
-            while not all(f.done() for f in futures.values()):
-                try:
-                    bar.update(q.get(timeout=0.5))
-                except queues.Empty:
-                    pass
-            return [futures[i].result() for i in range(len(shares))]  # a share's exception, raised here
-    finally:
-        bar.close()
-
-
-def _numpy(tree):
-    return jax.tree.map(np.asarray, tree)
-
-
-def _shares_of(build, scenes, keys, slots, machine, baselines, workers, devices) -> list[_Share]:
-    """The spiking controller on every episode, the baselines on the first ``baselines``: each cut in ``workers``
-    contiguous shares."""
-    from spikejax import workers as pools
-
+    env, blind = envs
     out = []
-    for controller in CONTROLLERS:
+    for controller in ("bang-bang", "straight", "privileged"):
         n = keys.shape[0] if controller == "bang-bang" else min(baselines, keys.shape[0])
-        circle = controller == "bang-bang" and build["lying"]
+        if n == 0:
+            continue
+        sub = jax.tree.map(lambda a: a[:n], scenes)
         params = _switch_params(machine, controller, n)
-        for a, b in pools.shares(n, workers) if n else []:
-            size = min(CIRCLE_CHUNK if circle else CHUNK, b - a)
-            part = lambda tree, a=a, b=b: _numpy(jax.tree.map(lambda x: x[a:b], tree))  # noqa: E731
-            data = np.asarray(jax.random.key_data(keys[a:b]))
-            out.append(_Share(build, controller, part(scenes), data, slots, part(params), size, devices))
+        run_in = env if controller == "bang-bang" else blind
+        circle = run_in.vision and run_in.tracker.detector.circle is not None
+        size = min(CIRCLE_CHUNK if circle else CHUNK, keys.shape[0])
+        res = _episodes(
+            run_in, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size, devices
+        )
+        out.append((controller, res, sub))
     return out
-
-
-def _joined(results: list[dict]) -> dict:
-    return {k: np.concatenate([r[k] for r in results]) for k in results[0]}
 
 
 def run(
@@ -545,10 +427,8 @@ def run(
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
     circle_every: int = CIRCLE_EVERY,
-    workers: int = 1,
 ) -> list[list]:
-    """Everything in the module docstring: each situation's episodes in ``workers`` shares (`_run_shares`), each
-    batch split over the first ``devices`` CPU devices of the process that runs it.
+    """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
     ``lead``: m, how far the approach to a lying entry aims past its centre
     (`robots.snake.pipe_controller.ControllerParams`; default that of
@@ -564,7 +444,7 @@ def run(
     `SEGMENT`; 1: every slot).
     """
     from robots.snake import pipe_controller as pc
-    from robots.snake import pipes
+    from robots.snake import pipe_env, pipes
 
     if episodes < 1:
         raise UserError(f"--episodes must be at least 1, got {episodes}")
@@ -587,6 +467,10 @@ def run(
         raise UserError(f"--circle-every must be a whole number of slots dividing {SEGMENT}, got {circle_every}")
     rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
+
+    def steps_for(env):
+        return max(1, int(round(seconds / env.dt / env.slot_steps)))
+
     jobs = []  # (name, lying, env factory, scenes)
     if scene_file is not None:
         scene = pipes.load_scene(scene_file)
@@ -610,41 +494,40 @@ def run(
             kind = pipes.SITUATIONS[name][0]
             first.setdefault(kind, name)
             jobs.append((name, kind == pipes.LYING, dict(situation=first[kind]), None))
-    settings = dict(
-        seconds=seconds,
-        circle_bin=circle_bin,
-        near=near,
-        random_phase=random_phase,
-        entry_memory=entry_memory,
-        circle_every=circle_every,
-    )
-    shares, plans = [], []
+    envs = {}
     for name, lying, where, scenes in jobs:
-        build = dict(
-            where={k: v if isinstance(v, str) else _numpy(v) for k, v in where.items()}, lying=lying, **settings
-        )
-        env = _envs(build)[0]
-        slots = _slots_for(env, seconds)
+        key = tuple(sorted((k, id(v)) for k, v in where.items()))
+        if key not in envs:
+            tracker = pipe_env.default_tracker(
+                circle=lying, line=not lying, circle_bin=circle_bin if lying else 1, near=near and lying
+            )
+            env = pipe_env.PipeEnv(**where, tracker=tracker)
+            envs[key] = tuple(
+                pipe_env.PipeEnv(
+                    **where,
+                    tracker=tracker,
+                    max_steps=steps_for(env) * env.slot_steps,
+                    vision=vision,
+                    random_phase=random_phase,
+                    entry_memory=entry_memory if (lying and near) else 0.0,
+                    circle_every=circle_every if lying else 1,
+                )
+                for vision in (True, False)
+            )
+        env = envs[key][0]
+        slots = steps_for(env)
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
         machine = pc.machine_params(lying, near=near)
         if lying and lead is not None:
             machine = machine._replace(lead=lead)
-        mine = _shares_of(build, scenes, keys, slots, machine, baselines, workers, devices)
-        plans.append((name, lying, env, scenes, machine, len(shares), len(mine)))
-        shares += mine
-    done = _run_shares(shares, workers, progress)
-    for name, lying, env, scenes, machine, first, many in plans:
-        by_controller: dict[str, list] = {}
-        for share, res in zip(shares[first : first + many], done[first : first + many]):
-            by_controller.setdefault(share.controller, []).append(res)
-        for controller, parts in by_controller.items():
-            res = _joined(parts)
-            sub = jax.tree.map(lambda a, n=len(res["end_step"]): a[:n], scenes)
+        for controller, res, sub in _conditions(
+            name, envs[key], scenes, keys, slots, machine, baselines, progress, devices
+        ):
             vision = controller == "bang-bang"
             lost = int(machine.lost_slots)
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, lost, vision))
-            if vision:
+            if controller == "bang-bang":
                 results.append((name, res, sub))
                 distance += distance_rows(name, controller, res)
     write_csv(out / "snake_pipe.csv", HEADER, rows)
@@ -727,17 +610,10 @@ def _add_arguments(parser) -> None:
         "differences, paired (robots.snake.reproduce_pipe_modes; writes snake_pipe_modes.csv and .png; default 0)",
     )
     parser.add_argument(
-        "--workers",
-        type=count,
-        default=None,
-        help="processes, one a core, each running a share of every situation's episodes (default: one per core; "
-        "the results do not depend on it)",
-    )
-    parser.add_argument(
         "--cpu-devices",
         type=count,
         default=None,
-        help="CPU devices each worker's batches are split over (default 1; with --workers 1, one per core)",
+        help="CPU devices each batch of episodes is split over (default: one per core)",
     )
 
 
@@ -751,7 +627,6 @@ def reproduce_command_run(
     situations: list[str] | None = None,
     compare_modes: int = 0,
     cpu_devices: int | None = None,
-    workers: int | None = None,
     no_progress: bool = False,
     lead: float | None = None,
     circle_bin: int = CIRCLE_BIN,
@@ -761,12 +636,10 @@ def reproduce_command_run(
     circle_every: int = CIRCLE_EVERY,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
-    from spikejax import workers as pools
     from spikejax.devices import cpu_devices_for_run
 
     with output_directory(out, command="reproduce snake-pipe") as out:
-        workers = pools.workers_for_run(workers)
-        devices = cpu_devices_for_run(cpu_devices) if workers == 1 else (cpu_devices or 1)
+        devices = cpu_devices_for_run(cpu_devices)
         rows = run(
             out,
             episodes,
@@ -782,7 +655,6 @@ def reproduce_command_run(
             random_phase=random_phase,
             entry_memory=entry_memory,
             circle_every=circle_every,
-            workers=workers,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
