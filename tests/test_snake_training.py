@@ -140,6 +140,18 @@ def _spikejax(*args):
     return subprocess.run([sys.executable, "-m", "spikejax.cli", *args], capture_output=True, text=True, timeout=900)
 
 
+def _cli(capsys, *args) -> tuple[int, str]:
+    """``spikejax ARGS`` in this process (the parsers and the error path of the command line): exit status, stderr."""
+    from spikejax import cli
+
+    capsys.readouterr()
+    try:
+        code = cli.main(list(args))
+    except SystemExit as e:  # argparse's own errors
+        code = e.code
+    return code, capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "flag, value, words",
     [
@@ -149,9 +161,9 @@ def _spikejax(*args):
         ("--lag-tau", "0", "--lag-tau must be positive"),
     ],
 )
-def test_reproduce_refuses_bad_flags_in_one_line(tmp_path, flag, value, words):
-    r = _spikejax("reproduce", "snake-rstdp", "--out", str(tmp_path / "o"), flag, value)
-    assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1
+def test_reproduce_refuses_bad_flags_in_one_line(tmp_path, capsys, flag, value, words):
+    code, err = _cli(capsys, "reproduce", "snake-rstdp", "--out", str(tmp_path / "o"), flag, value)
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1
 
 
 def test_reproduce_refuses_weights_of_another_training(tmp_path):
@@ -201,13 +213,14 @@ def test_evaluate_tests_weights_in_the_env_they_were_trained_in(tmp_path, monkey
     assert reproduce_rstdp.env_settings("lagged", 2.0) == {"compensate_from": "lagged", "lag_tau": 2.0}
 
 
-def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
+def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path, capsys):
     weights = tmp_path / "run" / "weights"
     weights.mkdir(parents=True)
     (weights / "basic.npz").write_bytes(b"")  # the track is read before any weights
     track = tmp_path / "track.csv"
     track.write_text("x,y\n0,0\n")
-    r = _spikejax(
+    code, err = _cli(
+        capsys,
         "evaluate",
         "snake-rstdp",
         "--weights",
@@ -217,7 +230,7 @@ def test_evaluate_refuses_a_bad_track_file_in_one_line(tmp_path):
         "--out",
         str(tmp_path / "ev"),
     )
-    assert r.returncode == 2 and "at least two" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert code == 2 and "at least two" in err and len(err.strip().splitlines()) == 1
 
 
 @pytest.mark.slow  # 2 min: compiles the programs in two worker processes
