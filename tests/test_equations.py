@@ -184,10 +184,14 @@ def _papers(text: str) -> set[str]:
 def _blocks(source: str) -> tuple[str, list[tuple[int, str]]]:
     """The module docstring, and every block as (first line number, text)."""
     tree = ast.parse(source)
+    lines = source.splitlines(keepends=True)
     blocks = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.JoinedStr):
-            blocks.append((node.lineno, ast.get_source_segment(source, node) or ""))
+        if isinstance(node, ast.JoinedStr):  # its source text (ast.get_source_segment splits the file on every call)
+            span = lines[node.lineno - 1 : node.end_lineno]
+            span[-1] = span[-1].encode()[: node.end_col_offset].decode()
+            span[0] = span[0].encode()[node.col_offset :].decode()
+            blocks.append((node.lineno, "".join(span)))
         elif isinstance(node, ast.Constant) and isinstance(node.value, str):
             blocks.append((node.lineno, node.value))
     run: list[str] = []

@@ -1,7 +1,7 @@
 """The closed pipe loop (`robots.snake.pipe_env`, `robots.snake.pipe_controller`): the spiking detector steers.
 
 One compiled program runs a small batch: standing pipes 1.3 m ahead and
-0.6-0.7 m to either side (going straight passes them more than 0.3 m away:
+0.6 m to either side (going straight passes them more than 0.3 m away:
 0.6 - 0.125 m of radius, less the head's swing of about 0.09 m), each driven
 by the paper's bang-bang law on the spiking detector's output and by going
 straight, for 16 s. The detector is the paper's (128 x 128 camera, 180 x 180
@@ -21,7 +21,7 @@ from robots.snake.gait import gait_params, gait_period, joint_targets
 from spikejax.errors import UserError
 
 SLOTS = 160  # 800 control steps, 16 s
-PLACEMENTS = ((1.3, 0.6), (1.3, -0.6), (1.3, 0.7), (1.3, -0.7))  # (ahead, right of the snake), m
+PLACEMENTS = ((1.3, 0.6), (1.3, -0.6))  # (ahead, right of the snake), m; at 0.7 m the loop reaches neither in 16 s
 
 
 def _scene(ahead, right):
@@ -56,7 +56,7 @@ def test_spiking_bang_bang_reaches_pipes_that_going_straight_misses(batch):
     success = np.asarray(final.metrics["success"])[: 2 * n] > 0
     spiking, straight = success[:n], success[n:]
     assert straight.sum() == 0  # the placements are out of reach without steering
-    assert spiking.sum() >= straight.sum() + 2
+    assert spiking.all()  # measured: at steps 735 and 681 of 800
     # The detector saw the pipe, and a success is the head within 0.3 m of the pipe's surface, never a collision.
     assert np.all(np.asarray(record["metrics"]["detected"][:n]).sum(axis=1) >= 20)
     assert np.all(np.asarray(final.metrics["collided"]) == 0)
@@ -88,7 +88,7 @@ def test_the_same_episode_anywhere_in_a_batch_is_the_same_trial(batch):
 
 def test_without_vision_the_same_physics_runs_and_nothing_is_detected(batch):
     """``PipeEnv(vision=False)``, the baselines' env, steps the same snakes as the full env, step for step:
-    the going-straight episodes of the batch again (the same batch of nine), with no camera or detector."""
+    the going-straight episodes of the batch again (the same batch of five), with no camera or detector."""
     blind = pipe_env.PipeEnv(vision=False)
     n = len(PLACEMENTS)
     scenes = jax.tree.map(lambda *a: jnp.stack(a), *[_scene(*p) for p in PLACEMENTS] * 2, _scene(*PLACEMENTS[0]))

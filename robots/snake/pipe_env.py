@@ -694,6 +694,7 @@ def rollout(env: PipeEnv, controller, controller_params, key: jax.Array, slots: 
     `rollout_start` and `rollout_slots` are its two halves, for a loop that
     runs an episode in parts (and stops once every episode of a batch is done).
     """
+    _check_slots(env, slots)  # before the reset, which runs op by op (seconds) when called outside jit
     carry = rollout_start(env, controller, key, scene, params)
     (final, _), record = rollout_slots(env, controller, controller_params, carry, slots)
     return record, final
@@ -702,6 +703,13 @@ def rollout(env: PipeEnv, controller, controller_params, key: jax.Array, slots: 
 def rollout_start(env: PipeEnv, controller, key: jax.Array, scene=None, params=None):
     """The carry of `rollout_slots` at an episode's start: ``(env.reset(key, scene, params), init())``."""
     return env.reset(key, scene, params), controller[0]()
+
+
+def _check_slots(env: PipeEnv, slots: int) -> int:
+    """``env.circle_every``, once ``slots`` is known to be whole groups of it."""
+    if slots % env.circle_every:
+        raise UserError(f"rollout_slots runs whole groups of circle_every = {env.circle_every} slots, not {slots}")
+    return env.circle_every
 
 
 def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int):
@@ -722,9 +730,7 @@ def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int
         }
         return (s, c), rec
 
-    every = env.circle_every
-    if slots % every:
-        raise UserError(f"rollout_slots runs whole groups of circle_every = {every} slots, not {slots}")
+    every = _check_slots(env, slots)
 
     def slot(carry, circle_update):
         carry, inner = jax.lax.scan(lambda c, _: one(c, False), carry, None, length=k - 1)
