@@ -13,7 +13,7 @@ from robots.hexapod import decisions
 def test_the_numpy_peer_gets_the_recorded_decisions_events():
     xs, ys, ts = bp.decision_events()
     track, scene, key = bp.recorded_decision()
-    d = jax.jit(lambda: decisions.decide(track, scene, key))()
+    d = jax.jit(decisions.decide)(track, scene, key)
     assert xs.size == int(d.events) > 1000
     # One frame interval's events carry its time: 16 frames 20 ms apart after the standing one.
     assert set(np.round(np.unique(ts) / decisions.FRAME_S).astype(int)) <= set(range(1, decisions.N_FRAMES))

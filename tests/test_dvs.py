@@ -1,5 +1,7 @@
 """DVS emulators: event counts and times a contrast step predicts, refractory, mismatch and noise; scenes."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -108,10 +110,12 @@ def test_step_counts_are_the_event_list_counted_per_pixel():
     key = jax.random.key(4)
     state = dvs.init(params, frames[0], 0.0, key=key)
     dense_state, total = state, 0
+    listed = jax.jit(functools.partial(dvs.step, capacity=2048, max_per_pixel=3))
+    counted = jax.jit(functools.partial(dvs.step_counts, max_per_pixel=3))
     for k, frame in enumerate(frames[1:], start=1):
         kk = jax.random.fold_in(key, k)
-        state, events, overflow = dvs.step(params, state, frame, 0.01 * k, capacity=2048, max_per_pixel=3, key=kk)
-        dense_state, counts, clipped = dvs.step_counts(params, dense_state, frame, 0.01 * k, max_per_pixel=3, key=kk)
+        state, events, overflow = listed(params, state, frame, 0.01 * k, key=kk)
+        dense_state, counts, clipped = counted(params, dense_state, frame, 0.01 * k, key=kk)
         image = jnp.zeros((10, 24), jnp.int32).at[events.y, events.x].add(events.valid.astype(jnp.int32))
         np.testing.assert_array_equal(np.asarray(counts), np.asarray(image))
         assert int(clipped) == int(overflow) and int(events.count()) < 2048

@@ -102,7 +102,9 @@ def test_spike_counts_and_entry():
 
 def test_find_body_vmaps_like_a_loop():
     spikes = jnp.stack([_spikes((+1, 90, 20 + i, 3), (-1, 90, 40 + 2 * i, 3), n_updates=3) for i in range(4)])
-    batched = jax.vmap(pp.find_body, in_axes=(None, 0, None, None, None))(pp.BodyParams(), spikes, THETA, RHO, 0.0)
+    batched = jax.jit(jax.vmap(pp.find_body, in_axes=(None, 0, None, None, None)))(
+        pp.BodyParams(), spikes, THETA, RHO, 0.0
+    )
     for i in range(4):
         one = find_body(pp.BodyParams(), spikes[i], THETA, RHO, 0.0)
         np.testing.assert_allclose(batched.width[i], one.width)

@@ -21,9 +21,10 @@ STEER = jnp.array([0.3, -0.2], jnp.float32)
 
 def test_the_grid_observation_is_eq2s_capped_rates_and_the_joint_angles():
     task = ppo.make_task("snake-track", "grid")
-    state = task.reset(jax.random.PRNGKey(1))
+    state = jax.jit(task.reset)(jax.random.PRNGKey(1))
+    step = jax.jit(task.step)
     for _ in range(3):
-        state = jax.jit(task.step)(state, STEER)
+        state = step(state, STEER)
     info, net = state.info, task.network
     counts = np.asarray(
         coding.grid_counts(info["prev_frame"], info["frame"], threshold=0.05, roi=net.roi, rows=net.rows, cols=net.cols)

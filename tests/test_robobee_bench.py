@@ -155,6 +155,7 @@ def test_brian2_and_spikejax_fly_the_same_closed_loop():
     assert np.all(brian2["w_ih"][mask == 0] == 0)
 
 
+@pytest.mark.slow  # 22 s, a flight's compile: the bench's rows; its peer checks stay in the fast suite
 def test_rows_report_throughput_for_the_full_flight():
     brian2, jx = brian2_flight(), spikejax_flight()
     # Brian2 is timed on 0.05 s and extrapolated to a 2.5 s flight; spikejax flew whole 0.05 s flights.

@@ -294,7 +294,8 @@ def decision_events() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from robots.hexapod import decisions
 
     track, scene, key = recorded_decision()
-    _, (counts, _) = jax.jit(lambda: decisions.decide(track, scene, key, with_spikes=True))()
+    # Track and scene as arguments: as constants XLA would render them at compile time.
+    _, (counts, _) = jax.jit(lambda *a: decisions.decide(*a, with_spikes=True))(track, scene, key)
     counts = np.asarray(counts)
     xs, ys, ts = [], [], []
     for k, image in enumerate(counts, start=1):
