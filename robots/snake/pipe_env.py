@@ -705,11 +705,10 @@ def rollout_start(env: PipeEnv, controller, key: jax.Array, scene=None, params=N
     return env.reset(key, scene, params), controller[0]()
 
 
-def _check_slots(env: PipeEnv, slots: int) -> int:
-    """``env.circle_every``, once ``slots`` is known to be whole groups of it."""
+def _check_slots(env: PipeEnv, slots: int) -> None:
+    """A one-line error unless ``slots`` is whole groups of ``env.circle_every``."""
     if slots % env.circle_every:
         raise UserError(f"rollout_slots runs whole groups of circle_every = {env.circle_every} slots, not {slots}")
-    return env.circle_every
 
 
 def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int):
@@ -730,7 +729,8 @@ def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int
         }
         return (s, c), rec
 
-    every = _check_slots(env, slots)
+    _check_slots(env, slots)
+    every = env.circle_every
 
     def slot(carry, circle_update):
         carry, inner = jax.lax.scan(lambda c, _: one(c, False), carry, None, length=k - 1)
