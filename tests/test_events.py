@@ -28,11 +28,15 @@ def test_compact_pads_with_invalid_slots():
     assert int(overflow) == 0 and int(events.count()) == 2
 
 
-@pytest.mark.parametrize("n, capacity", [(16384, 2048), (16384, 100), (1000, 64), (128, 16)])
-def test_compact_matches_numpy_selection_on_frames(n, capacity):
-    # 16384 takes the row-by-row running count, 1000 and 128 the plain one.
+@pytest.mark.parametrize(
+    "n, capacity, density",
+    [(16384, 2048, 0.05), (16384, 100, 0.05), (16384, 2048, 0.3), (16384, 64, 0.0), (1000, 64, 0.05), (37, 40, 0.9)],
+)
+def test_compact_matches_numpy_selection_on_frames(n, capacity, density):
+    # 1000 and 37 are no whole number of 32-bit words (the mask is padded); 0.3 of 16384 overflows 2048 slots;
+    # 0.9 of 37 sets most bits of a word (the bit search's every halving).
     rng = np.random.default_rng(n + capacity)
-    mask = rng.random(n) < 0.05
+    mask = rng.random(n) < density
     x = np.arange(n)
     events, overflow = compact(x, x // 7, 0.25, np.where(x % 3, 1, -1), mask, capacity)
     chosen = np.flatnonzero(mask)[:capacity]

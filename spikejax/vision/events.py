@@ -52,18 +52,39 @@ def empty(capacity: int) -> Events:
     return Events(zeros, zeros, jnp.zeros((capacity,), jnp.float32), zeros, jnp.zeros((capacity,), bool))
 
 
-def _running_count(mask: jax.Array, block: int = 128) -> jax.Array:
-    """``cumsum(mask)`` as int32, row by row when rows of ``block`` divide ``mask``.
+_WORD = 32  # mask bits packed per word
 
-    On a CPU under ``vmap`` one long ``cumsum`` of a 128 x 128 frame is slower
-    than ``cumsum`` along rows plus the rows' offsets (docs/BENCHMARKS.md).
+
+def _sources(mask: jax.Array, capacity: int) -> tuple[jax.Array, jax.Array]:
+    """The index of the ``k``-th set entry of the flat ``mask`` for each slot ``k < capacity``, and the total.
+
+    Slots past the total get ``mask.size`` (the padding entry `compact` appends). The mask is packed into 32-bit
+    words; each word's first slot is scattered (its running count of set bits), a running maximum over the slots
+    gives each slot its word, and five halvings by `lax.population_count` the bit within it. Work of order
+    ``n / 32 + capacity``: a running count of every entry (`jnp.cumsum`, a ``reduce_window`` on XLA's CPU
+    backend) and a binary search per slot cost three times as much under ``vmap`` (docs/BENCHMARKS.md).
     """
     n = mask.shape[0]
-    if n % block or n <= block:
-        return jnp.cumsum(mask, dtype=jnp.int32)
-    within = jnp.cumsum(mask.reshape(n // block, block), axis=1, dtype=jnp.int32)
-    before = jnp.cumsum(within[:, -1]) - within[:, -1]
-    return (within + before[:, None]).reshape(n)
+    pad = -n % _WORD
+    if pad:
+        mask = jnp.concatenate([mask, jnp.zeros((pad,), bool)])
+    shifts = jnp.arange(_WORD, dtype=jnp.uint32)
+    words = jnp.sum(mask.reshape(-1, _WORD).astype(jnp.uint32) << shifts, axis=1, dtype=jnp.uint32)
+    counts = jax.lax.population_count(words).astype(jnp.int32)
+    before = jnp.cumsum(counts) - counts  # set entries in the words before each
+    total = before[-1] + counts[-1]
+    slot = jnp.arange(capacity, dtype=jnp.int32)
+    # A word's first slot holds its index; words with no set bit share the next word's slot and lose to it.
+    first = jnp.zeros((capacity,), jnp.int32).at[before].max(jnp.arange(words.shape[0], dtype=jnp.int32), mode="drop")
+    word = jax.lax.associative_scan(jnp.maximum, first)
+    rank, bits, bit = slot - before[word], words[word], jnp.zeros((capacity,), jnp.int32)
+    for width in (16, 8, 4, 2, 1):  # the rank-th set bit of each slot's word
+        low = jax.lax.population_count(bits & jnp.uint32((1 << width) - 1)).astype(jnp.int32)
+        above = rank >= low
+        rank = jnp.where(above, rank - low, rank)
+        bits = jnp.where(above, bits >> width, bits)
+        bit = bit + jnp.where(above, width, 0)
+    return jnp.where(slot < total, word * _WORD + bit, n), total
 
 
 def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
@@ -74,17 +95,16 @@ def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
     Returns ``(events, overflow)``, ``overflow`` being the number of selected
     entries that did not fit (0 when all fit).
 
-    Slot ``k`` holds the entry where the running count of selected entries
-    reaches ``k + 1``, found by binary search of the running count: gathers
-    of ``capacity`` entries rather than scatters of all ``n``, faster under
+    Slot ``k`` gathers the ``k``-th selected entry (`_sources`): gathers of
+    ``capacity`` entries rather than scatters of all ``n``, faster under
     ``vmap`` on a CPU (docs/BENCHMARKS.md).
     """
     mask = jnp.asarray(mask, bool).reshape(-1)
     n = mask.shape[0]
-    count = _running_count(mask)
-    total = count[-1] if n else jnp.zeros((), jnp.int32)
-    # Slots beyond the total find index n: the padding entry appended below.
-    source = jnp.searchsorted(count, jnp.arange(1, capacity + 1, dtype=jnp.int32), side="left")
+    if n:
+        source, total = _sources(mask, capacity)
+    else:
+        source, total = jnp.zeros((capacity,), jnp.int32), jnp.zeros((), jnp.int32)
 
     def take(values, dtype):
         values = jnp.broadcast_to(jnp.asarray(values, dtype).reshape(-1), (n,))
