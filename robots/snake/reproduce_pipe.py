@@ -130,7 +130,7 @@ to other floating-point rounding than wider ones, and the closed loop makes the 
 a standing episode's head moved apart from step 5). From two lanes on an episode's trial does not depend on the batch
 (tested), so a run of fewer episodes fills the lanes with copies of them."""
 CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
-SEGMENT = 50  # slots (5 s) a batch runs between checks that all its episodes are done
+SEGMENT = 20  # slots (2 s) a batch runs between refills of its finished lanes (a multiple of CIRCLE_EVERY)
 
 
 def label_failures(success, approached, lying, detected, sign_right, depth_end, last_seen_slots, lost_slots):
@@ -386,29 +386,43 @@ def _switch_params(machine, controller: str, n: int):
     return jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (n,)), params)
 
 
-def _conditions(name, envs, scenes, keys, slots, machine, baselines: int, progress: bool, devices: int = 1):
-    """The spiking controller on every episode, the baselines on the first ``baselines``: ``[(label, res, scenes)]``.
+def _conditions(names, envs, scenes, keys, slots, machine, baselines: int, progress: bool, devices: int = 1):
+    """The spiking controller on every episode of each situation of ``names``, the baselines on the first
+    ``baselines``: ``{name: [(label, res, scenes)]}``.
 
     ``envs`` is ``(env, blind)``: the spiking controller runs in ``env``, the
     baselines, which read only the truth, in its twin without the camera and
     detector (``vision=False``: the same physics step for step, at a fifth
-    of the cost).
+    of the cost). ``scenes`` holds each name's placements. The situations
+    share one queue of lanes (`_episodes`) and the two baselines another (the
+    controller is a traced parameter): a batch waits for its slowest
+    episodes once a queue, not once a situation. An episode's trial does not
+    depend on its lane, so each result is the one it gets alone.
     """
     env, blind = envs
-    out = []
-    for controller in ("bang-bang", "straight", "privileged"):
-        n = keys.shape[0] if controller == "bang-bang" else min(baselines, keys.shape[0])
-        if n == 0:
+    out = {name: [] for name in names}
+    queues = [(env, ("bang-bang",)), (blind, ("straight", "privileged"))]
+    for run_in, controllers in queues:
+        parts = []  # (name, controller, episodes)
+        for controller in controllers:
+            n = keys.shape[0] if controller == "bang-bang" else min(baselines, keys.shape[0])
+            parts += [(name, controller, n) for name in names if n > 0]
+        if not parts:
             continue
-        sub = jax.tree.map(lambda a: a[:n], scenes)
-        params = _switch_params(machine, controller, n)
-        run_in = env if controller == "bang-bang" else blind
+        join = lambda trees: jax.tree.map(lambda *a: jnp.concatenate(a), *trees)  # noqa: E731
+        queue_scenes = join([jax.tree.map(lambda a, n=n: a[:n], scenes[name]) for name, _, n in parts])
+        queue_keys = jnp.concatenate([keys[:n] for _, _, n in parts])
+        params = join([_switch_params(machine, controller, n) for _, controller, n in parts])
         circle = run_in.vision and run_in.tracker.detector.circle is not None
-        size = min(CIRCLE_CHUNK if circle else CHUNK, keys.shape[0])
-        res = _episodes(
-            run_in, sub, keys[:n], slots, params, progress, f"snake-pipe {name} {controller}", size, devices
-        )
-        out.append((controller, res, sub))
+        size = min(CIRCLE_CHUNK if circle else CHUNK, queue_keys.shape[0])
+        desc = f"snake-pipe {','.join(names)} {'/'.join(controllers)}"
+        res = _episodes(run_in, queue_scenes, queue_keys, slots, params, progress, desc, size, devices)
+        start = 0
+        for name, controller, n in parts:
+            own = slice(start, start + n)
+            sub = jax.tree.map(lambda a, own=own: a[own], queue_scenes)
+            out[name].append((controller, {k: v[own] for k, v in res.items()}, sub))
+            start += n
     return out
 
 
@@ -494,7 +508,7 @@ def run(
             kind = pipes.SITUATIONS[name][0]
             first.setdefault(kind, name)
             jobs.append((name, kind == pipes.LYING, dict(situation=first[kind]), None))
-    envs = {}
+    envs, groups = {}, {}  # situations sharing an env run in one queue (`_conditions`)
     for name, lying, where, scenes in jobs:
         key = tuple(sorted((k, id(v)) for k, v in where.items()))
         if key not in envs:
@@ -515,17 +529,35 @@ def run(
                 for vision in (True, False)
             )
         env = envs[key][0]
-        slots = steps_for(env)
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
+        groups.setdefault(key, []).append((name, lying, scenes))
+    outcomes = {}
+    for key, group in groups.items():
+        env, lying = envs[key][0], group[0][1]
         machine = pc.machine_params(lying, near=near)
         if lying and lead is not None:
             machine = machine._replace(lead=lead)
-        for controller, res, sub in _conditions(
-            name, envs[key], scenes, keys, slots, machine, baselines, progress, devices
-        ):
+        names = [name for name, _, _ in group]
+        outcomes.update(
+            _conditions(
+                names,
+                envs[key],
+                {name: sc for name, _, sc in group},
+                keys,
+                steps_for(env),
+                machine,
+                baselines,
+                progress,
+                devices,
+            )  # fmt: skip
+        )
+        for name in names:
+            outcomes[name] = (outcomes[name], lying, env, int(machine.lost_slots))
+    for name, _, _, _ in jobs:
+        runs, lying, env, lost = outcomes[name]
+        for controller, res, sub in runs:
             vision = controller == "bang-bang"
-            lost = int(machine.lost_slots)
             rows.append(summarize(name, controller, res, lying, env.dt, env.slot_steps, lost, vision))
             if controller == "bang-bang":
                 results.append((name, res, sub))
