@@ -25,7 +25,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Events", "empty", "compact"]
+__all__ = ["Events", "empty", "compact", "set_indices"]
 
 
 class Events(NamedTuple):
@@ -55,10 +55,10 @@ def empty(capacity: int) -> Events:
 _WORD = 32  # mask bits packed per word
 
 
-def _sources(mask: jax.Array, capacity: int) -> tuple[jax.Array, jax.Array]:
+def set_indices(mask: jax.Array, capacity: int) -> tuple[jax.Array, jax.Array]:
     """The index of the ``k``-th set entry of the flat ``mask`` for each slot ``k < capacity``, and the total.
 
-    Slots past the total get ``mask.size`` (the padding entry `compact` appends). The mask is packed into 32-bit
+    Works under ``jit`` (``mask`` of static length). Slots past the total get ``mask.size`` (the padding entry `compact` appends). The mask is packed into 32-bit
     words; each word's first slot is scattered (its running count of set bits), a running maximum over the slots
     gives each slot its word, and five halvings by `lax.population_count` the bit within it. Work of order
     ``n / 32 + capacity``: a running count of every entry (`jnp.cumsum`, a ``reduce_window`` on XLA's CPU
@@ -95,14 +95,14 @@ def compact(x, y, t, p, mask, capacity: int) -> tuple[Events, jax.Array]:
     Returns ``(events, overflow)``, ``overflow`` being the number of selected
     entries that did not fit (0 when all fit).
 
-    Slot ``k`` gathers the ``k``-th selected entry (`_sources`): gathers of
+    Slot ``k`` gathers the ``k``-th selected entry (`set_indices`): gathers of
     ``capacity`` entries rather than scatters of all ``n``, faster under
     ``vmap`` on a CPU (docs/BENCHMARKS.md).
     """
     mask = jnp.asarray(mask, bool).reshape(-1)
     n = mask.shape[0]
     if n:
-        source, total = _sources(mask, capacity)
+        source, total = set_indices(mask, capacity)
     else:
         source, total = jnp.zeros((capacity,), jnp.int32), jnp.zeros((), jnp.int32)
 
