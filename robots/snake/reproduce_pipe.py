@@ -400,6 +400,7 @@ def _conditions(names, envs, scenes, keys, slots, machine, baselines: int, progr
     depend on its lane, so each result is the one it gets alone.
     """
     env, blind = envs
+    join = lambda trees: jax.tree.map(lambda *a: jnp.concatenate(a), *trees)  # noqa: E731
     out = {name: [] for name in names}
     queues = [(env, ("bang-bang",)), (blind, ("straight", "privileged"))]
     for run_in, controllers in queues:
@@ -409,7 +410,6 @@ def _conditions(names, envs, scenes, keys, slots, machine, baselines: int, progr
             parts += [(name, controller, n) for name in names if n > 0]
         if not parts:
             continue
-        join = lambda trees: jax.tree.map(lambda *a: jnp.concatenate(a), *trees)  # noqa: E731
         queue_scenes = join([jax.tree.map(lambda a, n=n: a[:n], scenes[name]) for name, _, n in parts])
         queue_keys = jnp.concatenate([keys[:n] for _, _, n in parts])
         params = join([_switch_params(machine, controller, n) for _, controller, n in parts])
@@ -539,21 +539,10 @@ def run(
         if lying and lead is not None:
             machine = machine._replace(lead=lead)
         names = [name for name, _, _ in group]
-        outcomes.update(
-            _conditions(
-                names,
-                envs[key],
-                {name: sc for name, _, sc in group},
-                keys,
-                steps_for(env),
-                machine,
-                baselines,
-                progress,
-                devices,
-            )  # fmt: skip
-        )
+        scenes = {name: sc for name, _, sc in group}
+        runs = _conditions(names, envs[key], scenes, keys, steps_for(env), machine, baselines, progress, devices)
         for name in names:
-            outcomes[name] = (outcomes[name], lying, env, int(machine.lost_slots))
+            outcomes[name] = (runs[name], lying, env, int(machine.lost_slots))
     for name, _, _, _ in jobs:
         runs, lying, env, lost = outcomes[name]
         for controller, res, sub in runs:
