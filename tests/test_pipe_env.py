@@ -227,7 +227,7 @@ def test_distance_table_bins_the_errors_by_true_depth_and_kind():
     assert rows[("entry", 1.5, 2.0)][5] == 0
 
 
-@pytest.mark.slow  # 12-22 s, mostly compiling a second loop (the fast budget is spent above)
+@pytest.mark.slow  # 40-60 s, mostly compiling a second loop and the figures' recording
 def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     import csv
 
@@ -259,6 +259,12 @@ def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     assert (out / "snake_pipe_trajectories.png").stat().st_size > 0
     with open(out / "snake_pipe_distance.csv") as f:
         assert next(csv.reader(f)) == DISTANCE_HEADER
+    # The Fig. 5-7 counterparts; Eqs. (4)-(6) follow the camera's swing (RMSE within a quarter of it).
+    for name in ("snake_pipe_camera_offset.png", "snake_pipe_detections.png", "snake_pipe_width_distance.png"):
+        assert (out / name).stat().st_size > 0
+    with open(out / "snake_pipe_camera_offset.csv") as f:
+        offset = {r["curve"]: r for r in csv.DictReader(f)}
+    assert float(offset["eq_4_6"]["rmse_share"]) <= 0.25 and float(offset["eq_4_6"]["correlation"]) >= 0.9
 
 
 @pytest.mark.slow  # about 40 s: two batch shapes compiled

@@ -44,7 +44,16 @@ Writes, in ``--out DIR``:
   detections, per situation, kind of detection (body, entry) and 0.5 m bin
   of the true depth (`DISTANCE_BINS`, `distance_rows`).
 - ``snake_pipe_trajectories.png``: the head's path of every episode, per
-  situation, with the pipes drawn at their places.
+  situation, with the pipes drawn at their places (the paper's Fig. 8).
+- With ``--figures`` (the default), the counterparts of Figs. 5-7
+  (`robots.snake.pipe_figures`): ``snake_pipe_camera_offset.png`` and
+  ``.csv`` (the camera's offset on a straight run, its fundamental and
+  Eqs. (4)-(6); RMSE and correlation), ``snake_pipe_detections.png`` (the
+  detected body or entry over the slot's events at true depths near 3, 2,
+  1 and 0.5 m) and ``snake_pipe_width_distance.png`` (detected width and
+  Eq. (8)'s distance against the true depth over an approach), from each
+  situation's first placement run again and recorded slot by slot (up to
+  `FIGURE_EPISODES` situations or scene pipes).
 
 With ``--compare-modes N``, also ``snake_pipe_modes.csv`` and ``.png``: N
 standing-right episodes of ``--seconds`` each in the synchronous and the
@@ -441,6 +450,7 @@ def run(
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
     circle_every: int = CIRCLE_EVERY,
+    figures: bool = True,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
 
@@ -455,7 +465,8 @@ def run(
     lying entry's memory weight (`ENTRY_MEMORY`; 0: steer by each slot's
     detection); with ``near`` only. ``circle_every``: the lying pipes'
     circle grid updates every that many slots (`CIRCLE_EVERY`; a divisor of
-    `SEGMENT`; 1: every slot).
+    `SEGMENT`; 1: every slot). ``figures``: also the counterparts of
+    Figs. 5-7 (`write_figures`).
     """
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env, pipes
@@ -532,7 +543,7 @@ def run(
         if scenes is None:
             scenes = jax.vmap(lambda k, n=name: env.sample_scene(k, n))(keys)
         groups.setdefault(key, []).append((name, lying, scenes))
-    outcomes = {}
+    outcomes, recorded = {}, []
     for key, group in groups.items():
         env, lying = envs[key][0], group[0][1]
         machine = pc.machine_params(lying, near=near)
@@ -543,6 +554,7 @@ def run(
         runs = _conditions(names, envs[key], scenes, keys, steps_for(env), machine, baselines, progress, devices)
         for name in names:
             outcomes[name] = (runs[name], lying, env, int(machine.lost_slots))
+        recorded.append((env, lying, machine, names, scenes, steps_for(env)))
     for name, _, _, _ in jobs:
         runs, lying, env, lost = outcomes[name]
         for controller, res, sub in runs:
@@ -554,7 +566,47 @@ def run(
     write_csv(out / "snake_pipe.csv", HEADER, rows)
     write_csv(out / "snake_pipe_distance.csv", DISTANCE_HEADER, distance)
     _plot(out / "snake_pipe_trajectories.png", results)
+    if figures:
+        write_figures(out, recorded, keys[0], [name for name, _, _, _ in jobs][:FIGURE_EPISODES])
     return rows
+
+
+FIGURE_EPISODES = 4  # situations (or scene pipes) in the Fig. 6 and 7 counterparts
+
+
+def write_figures(out: Path, recorded, key, names: list[str]) -> None:
+    """The counterparts of Figs. 5-7 (`robots.snake.pipe_figures`) in ``out``.
+
+    ``recorded``: ``(env, lying, machine, names, scenes, slots)`` per env of
+    the run; the first placement of each of ``names`` runs again with ``key``
+    (the first episode's) and the spiking controller, recorded slot by slot.
+    Writes ``snake_pipe_camera_offset.png`` and ``.csv``,
+    ``snake_pipe_detections.png`` and ``snake_pipe_width_distance.png``.
+    """
+    from robots.snake import pipe_figures
+
+    episodes = {}
+    for env, lying, machine, group, scenes, slots in recorded:
+        chosen = [name for name in group if name in names]
+        if not chosen:
+            continue
+        first = jax.tree.map(lambda *a: jnp.concatenate(a), *[jax.tree.map(lambda a: a[:1], scenes[n]) for n in chosen])
+        keys = jnp.stack([key] * len(chosen))
+        rec = pipe_figures.record(env, keys, first, _switch_params(machine, "bang-bang", len(chosen)), slots)
+        for i, name in enumerate(chosen):
+            episodes[name] = (name, lying, pipe_figures.lane(rec, i), env.circle_every)
+    episodes = [episodes[name] for name in names if name in episodes]
+    stats = pipe_figures.camera_offset_figure(out / "snake_pipe_camera_offset.png")
+    write_csv(
+        out / "snake_pipe_camera_offset.csv",
+        OFFSET_HEADER,
+        [[curve, *(s[k] for k in OFFSET_HEADER[1:])] for curve, s in stats.items()],
+    )
+    pipe_figures.detections_figure(out / "snake_pipe_detections.png", episodes)
+    pipe_figures.distance_figure(out / "snake_pipe_width_distance.png", episodes)
+
+
+OFFSET_HEADER = ["curve", "rmse", "amplitude", "rmse_share", "correlation"]
 
 
 def _add_arguments(parser) -> None:
@@ -623,6 +675,13 @@ def _add_arguments(parser) -> None:
         f"slot; N divides {SEGMENT})",
     )
     parser.add_argument(
+        "--figures",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also draw the counterparts of Figs. 5-7 (camera offset, detections over events, width and distance; "
+        "one more episode per situation, recorded; default on)",
+    )
+    parser.add_argument(
         "--compare-modes",
         type=count_or_zero,
         default=0,
@@ -655,6 +714,7 @@ def reproduce_command_run(
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
     circle_every: int = CIRCLE_EVERY,
+    figures: bool = True,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
     from spikejax.devices import cpu_devices_for_run
@@ -676,10 +736,16 @@ def reproduce_command_run(
             random_phase=random_phase,
             entry_memory=entry_memory,
             circle_every=circle_every,
+            figures=figures,
         )
         for r in rows:
             print(f"{r[0]:<22} {r[1]:<11} {r[3]}/{r[2]} succeeded, 95% CI [{r[5]:.2f}, {r[6]:.2f}]")
         print(f"wrote {out}/snake_pipe.csv, snake_pipe_distance.csv, snake_pipe_trajectories.png")
+        if figures:
+            print(
+                f"wrote {out}/snake_pipe_camera_offset.png and .csv, snake_pipe_detections.png, "
+                "snake_pipe_width_distance.png"
+            )
         if compare_modes:
             from robots.snake.reproduce_pipe_modes import MODE_HEADER
             from robots.snake.reproduce_pipe_modes import compare_modes as run_modes
