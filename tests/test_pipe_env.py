@@ -265,6 +265,9 @@ def test_reproduce_with_a_scene_file_writes_one_row_per_pipe(tmp_path):
     with open(out / "snake_pipe_camera_offset.csv") as f:
         offset = {r["curve"]: r for r in csv.DictReader(f)}
     assert float(offset["eq_4_6"]["rmse_share"]) <= 0.25 and float(offset["eq_4_6"]["correlation"]) >= 0.9
+    with open(out / "snake_pipe_width_distance.csv") as f:
+        approach = list(csv.DictReader(f))
+    assert [r["name"] for r in approach] == ["pipe 1 (standing)"]
 
 
 @pytest.mark.slow  # about 40 s: two batch shapes compiled

@@ -50,8 +50,9 @@ Writes, in ``--out DIR``:
   ``.csv`` (the camera's offset on a straight run, its fundamental and
   Eqs. (4)-(6); RMSE and correlation), ``snake_pipe_detections.png`` (the
   detected body or entry over the slot's events at true depths near 3, 2,
-  1 and 0.5 m) and ``snake_pipe_width_distance.png`` (detected width and
-  Eq. (8)'s distance against the true depth over an approach), from each
+  1 and 0.5 m) and ``snake_pipe_width_distance.png`` and ``.csv`` (detected
+  width and Eq. (8)'s distance against the true depth over an approach; the
+  mean error over the first and the last third of the detections), from each
   situation's first placement run again and recorded slot by slot (up to
   `FIGURE_EPISODES` situations or scene pipes).
 
@@ -581,7 +582,10 @@ def write_figures(out: Path, recorded, key, names: list[str]) -> None:
     the run; the first placement of each of ``names`` runs again with ``key``
     (the first episode's) and the spiking controller, recorded slot by slot.
     Writes ``snake_pipe_camera_offset.png`` and ``.csv``,
-    ``snake_pipe_detections.png`` and ``snake_pipe_width_distance.png``.
+    ``snake_pipe_detections.png`` and ``snake_pipe_width_distance.png`` and
+    ``.csv`` (per recorded episode: its detections of the target's kind and
+    the mean |Eq. (8) distance - true depth| at them, m, over all and over
+    the first and the last third of them).
     """
     from robots.snake import pipe_figures
 
@@ -603,10 +607,14 @@ def write_figures(out: Path, recorded, key, names: list[str]) -> None:
         [[curve, *(s[k] for k in OFFSET_HEADER[1:])] for curve, s in stats.items()],
     )
     pipe_figures.detections_figure(out / "snake_pipe_detections.png", episodes)
-    pipe_figures.distance_figure(out / "snake_pipe_width_distance.png", episodes)
+    summary = pipe_figures.distance_figure(out / "snake_pipe_width_distance.png", episodes)
+    write_csv(
+        out / "snake_pipe_width_distance.csv", APPROACH_HEADER, [[s[k] for k in APPROACH_HEADER] for s in summary]
+    )
 
 
 OFFSET_HEADER = ["curve", "rmse", "amplitude", "rmse_share", "correlation"]
+APPROACH_HEADER = ["name", "detections", "mean_error", "first_third", "last_third"]
 
 
 def _add_arguments(parser) -> None:
@@ -744,7 +752,7 @@ def reproduce_command_run(
         if figures:
             print(
                 f"wrote {out}/snake_pipe_camera_offset.png and .csv, snake_pipe_detections.png, "
-                "snake_pipe_width_distance.png"
+                "snake_pipe_width_distance.png and .csv"
             )
         if compare_modes:
             from robots.snake.reproduce_pipe_modes import MODE_HEADER
