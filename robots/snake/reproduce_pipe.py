@@ -46,7 +46,7 @@ Writes, in ``--out DIR``:
 - ``snake_pipe_trajectories.png``: the head's path of every episode, per
   situation, with the pipes drawn at their places (the paper's Fig. 8).
 - With ``--figures`` (the default), the counterparts of Figs. 5-7
-  (`robots.snake.pipe_figures`): ``snake_pipe_camera_offset.png`` and
+  (`robots.snake.reproduce_pipe_figures`): ``snake_pipe_camera_offset.png`` and
   ``.csv`` (the camera's offset on a straight run, its fundamental and
   Eqs. (4)-(6); RMSE and correlation), ``snake_pipe_detections.png`` (the
   detected body or entry over the slot's events at true depths near 3, 2,
@@ -576,7 +576,7 @@ FIGURE_EPISODES = 4  # situations (or scene pipes) in the Fig. 6 and 7 counterpa
 
 
 def write_figures(out: Path, recorded, key, names: list[str]) -> None:
-    """The counterparts of Figs. 5-7 (`robots.snake.pipe_figures`) in ``out``.
+    """The counterparts of Figs. 5-7 (`robots.snake.reproduce_pipe_figures`) in ``out``.
 
     ``recorded``: ``(env, lying, machine, names, scenes, slots)`` per env of
     the run; the first placement of each of ``names`` runs again with ``key``
@@ -587,7 +587,7 @@ def write_figures(out: Path, recorded, key, names: list[str]) -> None:
     the mean |Eq. (8) distance - true depth| at them, m, over all and over
     the first and the last third of them).
     """
-    from robots.snake import pipe_figures
+    from robots.snake import reproduce_pipe_figures as pipe_figures
 
     episodes = {}
     for env, lying, machine, group, scenes, slots in recorded:

@@ -1,4 +1,4 @@
-"""The counterparts of Figs. 5-7 of the snake pipe-tracking paper (`robots.snake.pipe_figures`)."""
+"""The counterparts of Figs. 5-7 of the snake pipe-tracking paper (`robots.snake.reproduce_pipe_figures`)."""
 
 import math
 
@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from robots.snake import pipe_figures as pf
+from robots.snake import reproduce_pipe_figures as pf
 from robots.snake.calibration import SWING, Run
 from spikejax.vision import pipe as pp
 
