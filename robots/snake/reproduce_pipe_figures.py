@@ -258,7 +258,7 @@ def distance_figure(path: Path, episodes: list[tuple[str, bool, dict, int]]) -> 
 
     fig = Figure(figsize=(4.2 * len(episodes), 3.6))
     axes = fig.subplots(1, len(episodes), squeeze=False)[0]
-    summary = []
+    summary, handles = [], []
     for ax, (name, lying, rec, _) in zip(axes, episodes):
         idx, width, distance = target_detections(rec, lying)
         t, depth = rec["t"], rec["depth"]
@@ -282,8 +282,10 @@ def distance_figure(path: Path, episodes: list[tuple[str, bool, dict, int]]) -> 
         twin.set_ylabel("detected width, px" + (" (ring diameter)" if lying else ""), color="tab:blue")
         s = summary[-1]
         ax.set_title(f"{name}: mean |error| {s['mean_error']:.2f} m ({s['detections']} detections)", fontsize=9)
-        ax.legend(fontsize=7, loc="upper right")
+        handles = ax.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
     fig.suptitle("Width and distance over the approach (one episode each)", fontsize=9)
-    fig.tight_layout()
+    if handles:
+        fig.legend(handles, [h.get_label() for h in handles], loc="lower center", ncol=3, fontsize=8)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     fig.savefig(path, dpi=110)
     return summary
