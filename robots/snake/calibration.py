@@ -219,6 +219,18 @@ def _amplitude_for(phase, a, v, ratio, omega, y):
     return amplitude, float(np.mean((y - amplitude * basis) ** 2))
 
 
+def whole_periods(run: Run) -> slice:
+    """The steps `fit` uses: whole gait periods after the first (the start-up), short of the last half period
+    (where the central line of `true_offset` runs out)."""
+    per = run.steps_per_period
+    return slice(per, per + ((len(run.t) - per - per // 2) // per) * per)
+
+
+def fundamental_coefficient(t: np.ndarray, y: np.ndarray, omega: float) -> complex:
+    """``c`` with ``y``'s component at ``omega`` equal to ``Re(c e^{i omega t})`` (its FFT bin over whole periods)."""
+    return complex(2.0 * np.mean(y * np.exp(-1j * omega * t)))
+
+
 def fit(run: Run, window: int = WINDOW, omega: float | None = None) -> SwingFit:
     """Fit ``(A, alpha, phi_pos)`` of Eqs. (4)-(6) to a straight run (see the module's notes).
 
@@ -238,11 +250,9 @@ def fit(run: Run, window: int = WINDOW, omega: float | None = None) -> SwingFit:
         raise UserError(f"the mean filter's window must be a positive integer of steps, not {window!r}")
     dt = float(run.t[1] - run.t[0])
     omega = 2 * math.pi / (per * dt) if omega is None else float(omega)
-    used = slice(per, per + ((len(run.t) - per - per // 2) // per) * per)  # whole periods after the first
-    t, theta = run.t[used], run.angle[used]
+    used = whole_periods(run)
     # Eq. (4): the fundamental of the head joint over whole periods (its FFT bin at omega).
-    c = 2.0 * np.mean(theta * np.exp(-1j * omega * t))
-    a = float(abs(c))
+    a = float(abs(fundamental_coefficient(run.t[used], run.angle[used], omega)))
     ratio = 0.5 * math.pi / a
     angle = pp.causal_mean(run.angle, window)[used]
     velocity = pp.causal_mean(run.velocity, window)[used]

@@ -49,8 +49,8 @@ Writes, in ``--out DIR``:
   (`robots.snake.reproduce_pipe_figures`): ``snake_pipe_camera_offset.png`` and
   ``.csv`` (the camera's offset on a straight run, its fundamental and
   Eqs. (4)-(6); RMSE and correlation), ``snake_pipe_detections.png`` (the
-  detected body or entry over the slot's events at true depths near 3, 2,
-  1 and 0.5 m) and ``snake_pipe_width_distance.png`` and ``.csv`` (detected
+  detected body or entry over the slot's events at four depths spread over
+  an approach) and ``snake_pipe_width_distance.png`` and ``.csv`` (detected
   width and Eq. (8)'s distance against the true depth over an approach; the
   mean error over the first and the last third of the detections), from each
   situation's first placement run again and recorded slot by slot (up to
@@ -388,6 +388,11 @@ def _plot(path: Path, results) -> None:
     fig.savefig(path, dpi=110)
 
 
+def _join(trees):
+    """Trees of equal structure concatenated leaf by leaf along the leading axis."""
+    return jax.tree.map(lambda *a: jnp.concatenate(a), *trees)
+
+
 def _switch_params(machine, controller: str, n: int):
     """`robots.snake.pipe_controller.SwitchParams` for ``n`` episodes of one controller (leaves ``(n,)``)."""
     from robots.snake import pipe_controller as pc
@@ -410,7 +415,6 @@ def _conditions(names, envs, scenes, keys, slots, machine, baselines: int, progr
     depend on its lane, so each result is the one it gets alone.
     """
     env, blind = envs
-    join = lambda trees: jax.tree.map(lambda *a: jnp.concatenate(a), *trees)  # noqa: E731
     out = {name: [] for name in names}
     queues = [(env, ("bang-bang",)), (blind, ("straight", "privileged"))]
     for run_in, controllers in queues:
@@ -420,9 +424,9 @@ def _conditions(names, envs, scenes, keys, slots, machine, baselines: int, progr
             parts += [(name, controller, n) for name in names if n > 0]
         if not parts:
             continue
-        queue_scenes = join([jax.tree.map(lambda a, n=n: a[:n], scenes[name]) for name, _, n in parts])
+        queue_scenes = _join([jax.tree.map(lambda a, n=n: a[:n], scenes[name]) for name, _, n in parts])
         queue_keys = jnp.concatenate([keys[:n] for _, _, n in parts])
-        params = join([_switch_params(machine, controller, n) for _, controller, n in parts])
+        params = _join([_switch_params(machine, controller, n) for _, controller, n in parts])
         circle = run_in.vision and run_in.tracker.detector.circle is not None
         size = min(CIRCLE_CHUNK if circle else CHUNK, queue_keys.shape[0])
         desc = f"snake-pipe {','.join(names)} {'/'.join(controllers)}"
@@ -594,7 +598,7 @@ def write_figures(out: Path, recorded, key, names: list[str]) -> None:
         chosen = [name for name in group if name in names]
         if not chosen:
             continue
-        first = jax.tree.map(lambda *a: jnp.concatenate(a), *[jax.tree.map(lambda a: a[:1], scenes[n]) for n in chosen])
+        first = _join([jax.tree.map(lambda a: a[:1], scenes[n]) for n in chosen])
         keys = jnp.stack([key] * len(chosen))
         rec = pipe_figures.record(env, keys, first, _switch_params(machine, "bang-bang", len(chosen)), slots)
         for i, name in enumerate(chosen):

@@ -23,7 +23,7 @@ The recorded episodes (`record`) are each situation's first placement and
 key of the run, driven by the spiking bang-bang controller in the run's own
 env; per slot they keep the slot's events as one signed image (ON minus
 OFF), the slot's body and entry (`spikejax.vision.pipe.Pipe`), Alg. 3's
-distance of each, the true depth and the outcome.
+distance of each, the true depth and whether the episode is done.
 """
 
 from __future__ import annotations
@@ -36,14 +36,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from robots.snake.reproduce_pipe import MIN_LANES
+
 PANELS = 4  # Fig. 6's columns: detections spread over the approach
 OFFSET_PERIODS = 12.0  # gait periods of Fig. 5's straight run
 
 
 def fundamental(t: np.ndarray, y: np.ndarray, omega: float) -> np.ndarray:
     """``y``'s component at ``omega`` (its FFT coefficient over ``t``, whole periods): ``Re(c e^{i omega t})``."""
-    c = 2.0 * np.mean(y * np.exp(-1j * omega * t))
-    return np.real(c * np.exp(1j * omega * t))
+    from robots.snake.calibration import fundamental_coefficient
+
+    return np.real(fundamental_coefficient(t, y, omega) * np.exp(1j * omega * t))
 
 
 def offset_stats(true: np.ndarray, estimate: np.ndarray) -> dict:
@@ -69,8 +72,7 @@ def camera_offset_figure(path: Path, run=None, periods: float = OFFSET_PERIODS) 
     from robots.snake import calibration
 
     run = calibration.straight_run(periods) if run is None else run
-    per = run.steps_per_period
-    used = slice(per, per + ((len(run.t) - per - per // 2) // per) * per)
+    used = calibration.whole_periods(run)
     t = run.t[used]
     true = calibration.true_offset(run)[used]
     omega = calibration.SWING.omega
@@ -103,7 +105,7 @@ def _recorder(env, every_slots: int, slots: int):
     from robots.snake import pipe_env
     from spikejax.vision import detect
 
-    init, act = pc.switch
+    act = pc.switch[1]
     det = env.tracker.detector
     k = env.slot_steps
 
@@ -128,7 +130,6 @@ def _recorder(env, every_slots: int, slots: int):
             "depth": s.metrics["depth"],
             "t": s.pipeline_state.time,
             "done": s.done,
-            "success": s.metrics["success"],
         }
         return carry, rec
 
@@ -159,8 +160,8 @@ def record(env, keys, scenes, params, slots: int) -> dict:
     every = env.circle_every
     slots = max(every, slots // every * every)
     n = keys.shape[0]
-    if n < 2:
-        fill = np.zeros(2, int)
+    if n < MIN_LANES:
+        fill = np.zeros(MIN_LANES, int)
         rec = record(
             env, keys[fill], jax.tree.map(lambda a: a[fill], scenes), jax.tree.map(lambda a: a[fill], params), slots
         )
