@@ -212,3 +212,22 @@ def test_a_skipped_circle_update_carries_the_slots_events_to_the_next(both):
     assert np.any(np.asarray(ref.v) != 0)
     with pytest.raises(UserError, match="needs circle_per_slot and no line grid"):
         stream.slot_end(tracker, both[1], stream.init(tracker), 0.0, False)
+
+
+def test_a_skipped_slot_whose_events_are_dropped_leaves_the_next_update_its_own(both):
+    """``slot_end(circle_update=False, keep_events=False)``: the next update sees only the slots after it."""
+    tracker, _, ev, ts = both[:4]
+    det = detect.Detector(circle=tracker.detector.circle, line=None, sub_slots=2 * K)
+    alone = stream.Tracker(det, circle_per_slot=True)
+    params = stream.tracker_params(alone, track=pp.track_params(width=SIZE, speed=0.1))
+    step, end = jax.jit(stream.step, static_argnums=0), jax.jit(stream.slot_end, static_argnums=(0, 4, 5))
+    state, ref = stream.init(alone), stream.init(alone).grids.circle
+    for s in range(SLOTS):
+        for j in range(K):
+            state = step(alone, params, state, jax.tree.map(lambda a: a[1, s, j], ev), ts[1][s, j])
+        state, out = end(alone, params, state, ts[1][s, -1], s % 2 == 1, False)
+        if s % 2 == 1:
+            own = jax.tree.map(lambda a: a[1, s].reshape(-1), ev)
+            ref, _ = hough.sync_step(params.detector.circle, det.circle, ref, own, ts[1][s, -1])
+        np.testing.assert_array_equal(np.asarray(state.grids.circle.v), np.asarray(ref.v))
+    assert np.any(np.asarray(ref.v) != 0)

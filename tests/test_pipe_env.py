@@ -160,6 +160,14 @@ def test_bad_arguments_are_one_line_errors():
         pipe_env.rollout(every, pc.bang_bang, pc.ControllerParams(), jax.random.key(0), 3)
     with pytest.raises(UserError, match="--circle-every"):
         rp.run(None, 1, 1.0, circle_every=3)
+    with pytest.raises(UserError, match="circle_window must be"):
+        pipe_env.PipeEnv(situation="lying-right", tracker=entry_only, circle_every=2, circle_window=3)
+    with pytest.raises(UserError, match="--circle-window"):
+        rp.run(None, 1, 1.0, circle_every=4, circle_window=0)
+    # A group of four slots whose update sees the last two: the first two slots' events are dropped.
+    window = pipe_env.PipeEnv(situation="lying-right", tracker=entry_only, circle_every=4, circle_window=2)
+    assert window.circle_schedule() == ((False, False), (False, False), (False, True), (True, True))
+    assert every.circle_schedule() == ((False, True), (True, True))  # the window defaults to all the group
 
 
 def test_failure_labels_take_the_first_cause_that_applies():

@@ -303,6 +303,11 @@ class PipeEnv(Env):
             nothing; the controller still acts at each (the remembered entry
             steers there). `step` called without ``slot_end`` (Brax's call)
             updates it every slot.
+        circle_window: the slots of events each update sees with
+            ``circle_every > 1``: the last ``circle_window`` of its group (the
+            earlier slots' event images dropped, ``keep_events`` of
+            `spikejax.vision.stream.slot_end`); default ``circle_every``, all of
+            them.
         physics_kwargs: passed to `robots.snake.physics.make_physics`.
     """
 
@@ -329,6 +334,7 @@ class PipeEnv(Env):
         random_phase: bool = False,
         entry_memory: float = 0.0,
         circle_every: int = 1,
+        circle_window: int | None = None,
         **physics_kwargs: Any,
     ):
         if situation not in pipes.SITUATIONS:
@@ -388,6 +394,10 @@ class PipeEnv(Env):
         if circle_every > 1 and not (self.tracker.circle_per_slot and self.tracker.detector.line is None):
             raise UserError("circle_every > 1 needs a tracker with the circle grid per slot and no line grid")
         self.circle_every = circle_every
+        window = circle_every if circle_window is None else circle_window
+        if isinstance(window, bool) or not isinstance(window, int) or not 1 <= window <= circle_every:
+            raise UserError(f"circle_window must be a whole number of slots in [1, circle_every], got {window!r}")
+        self.circle_window = window
         self.gait = gait_params() if gait is None else gait
         self.window = max(1, int(round(float(gait_period(self.gait)) / self.dt)))
 
@@ -483,14 +493,27 @@ class PipeEnv(Env):
             info=info,
         )
 
-    def step(self, state: State, action: jax.Array, slot_end: bool | None = None, circle_update: bool = True) -> State:
+    def circle_schedule(self) -> tuple[tuple[bool, bool], ...]:
+        """Per slot of a group of ``circle_every``: ``(circle_update, keep_events)`` of `step` at its end."""
+        every, window = self.circle_every, self.circle_window
+        return tuple((i == every - 1, i >= every - window) for i in range(every))
+
+    def step(
+        self,
+        state: State,
+        action: jax.Array,
+        slot_end: bool | None = None,
+        circle_update: bool = True,
+        keep_events: bool = True,
+    ) -> State:
         """One control step (see the module docstring).
 
         ``slot_end``: ``None`` (Brax's call) ends the detector's slot when it
         is due, decided per step; ``True`` / ``False`` (static) says whether
         this step ends a slot, for loops that know it (`rollout`).
         ``circle_update`` (static, with ``slot_end=True``): ``False`` skips
-        the circle grid at this slot's end (``circle_every``).
+        the circle grid at this slot's end (``circle_every``), ``keep_events``
+        (static) whether its events wait for the next update (`circle_schedule`).
         """
         action = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0)
         info = dict(state.info)
@@ -523,7 +546,7 @@ class PipeEnv(Env):
                 tstate,
             )
         elif slot_end:
-            tstate, out = stream.slot_end(tr, tp, tstate, phys.time, circle_update)
+            tstate, out = stream.slot_end(tr, tp, tstate, phys.time, circle_update, keep_events)
             ended = jnp.ones((), bool)
         else:
             out, ended = stream.no_slot(tr, tstate, phys.time), jnp.zeros((), bool)
@@ -716,10 +739,10 @@ def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int
     act = controller[1]
     k = env.slot_steps
 
-    def one(carry, end, circle_update=True):
+    def one(carry, end, circle_update=True, keep_events=True):
         s, c = carry
         c, action = act(controller_params, c, s)
-        s = env.step(s, action, slot_end=end, circle_update=circle_update)
+        s = env.step(s, action, slot_end=end, circle_update=circle_update, keep_events=keep_events)
         rec = {
             "metrics": s.metrics,
             "done": s.done,
@@ -732,15 +755,15 @@ def rollout_slots(env: PipeEnv, controller, controller_params, carry, slots: int
     _check_slots(env, slots)
     every = env.circle_every
 
-    def slot(carry, circle_update):
+    def slot(carry, schedule):
         carry, inner = jax.lax.scan(lambda c, _: one(c, False), carry, None, length=k - 1)
-        carry, last = one(carry, True, circle_update)
+        carry, last = one(carry, True, *schedule)
         return carry, jax.tree.map(lambda a, b: jnp.concatenate([a, b[None]]), inner, last)
 
     def group(carry, _):  # the circle grid updates at the group's last slot end (static)
         recs = []
-        for i in range(every):
-            carry, rec = slot(carry, i == every - 1)
+        for schedule in env.circle_schedule():
+            carry, rec = slot(carry, schedule)
             recs.append(rec)
         return carry, jax.tree.map(lambda *a: jnp.concatenate(a), *recs)
 

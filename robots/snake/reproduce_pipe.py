@@ -134,12 +134,13 @@ ENTRY_MEMORY = 0.3
 # ``--episodes 32`` the same 26 / 25 entered as with every slot, 164.5 against 220.8 s a side on one core; on
 # 256 a side 378 against 390 of 512 (docs/BENCHMARKS.md).
 CIRCLE_EVERY = 2
+CIRCLE_WINDOW = 2
 MIN_LANES = 2
 """The fewest lanes `_episodes` runs on a device: XLA compiles a batch of one lane (its axis of size 1 folded away)
 to other floating-point rounding than wider ones, and the closed loop makes the difference another trial (measured:
 a standing episode's head moved apart from step 5). From two lanes on an episode's trial does not depend on the batch
 (tested), so a run of fewer episodes fills the lanes with copies of them."""
-CIRCLE_CHUNK = 16  # with the circle grid: its state and spectra per episode outgrow the cache in larger batches
+CIRCLE_CHUNK = 32  # with the circle grid (16 a device on two): its spectra per lane outgrow the cache in larger batches
 SEGMENT = 20  # slots (2 s) a batch runs between refills of its finished lanes (a multiple of CIRCLE_EVERY)
 
 
@@ -455,6 +456,7 @@ def run(
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
     circle_every: int = CIRCLE_EVERY,
+    circle_window: int | None = None,
     figures: bool = True,
 ) -> list[list]:
     """Everything in the module docstring; each batch split over the first ``devices`` CPU devices.
@@ -470,7 +472,9 @@ def run(
     lying entry's memory weight (`ENTRY_MEMORY`; 0: steer by each slot's
     detection); with ``near`` only. ``circle_every``: the lying pipes'
     circle grid updates every that many slots (`CIRCLE_EVERY`; a divisor of
-    `SEGMENT`; 1: every slot). ``figures``: also the counterparts of
+    `SEGMENT`; 1: every slot). ``circle_window``: each update sees the
+    events of the last that many of its slots (default `CIRCLE_WINDOW`, at
+    most ``circle_every``). ``figures``: also the counterparts of
     Figs. 5-7 (`write_figures`).
     """
     from robots.snake import pipe_controller as pc
@@ -495,6 +499,10 @@ def run(
         or SEGMENT % circle_every
     ):
         raise UserError(f"--circle-every must be a whole number of slots dividing {SEGMENT}, got {circle_every}")
+    if circle_window is None:
+        circle_window = min(CIRCLE_WINDOW, circle_every)
+    if isinstance(circle_window, bool) or not isinstance(circle_window, int) or not 1 <= circle_window <= circle_every:
+        raise UserError(f"--circle-window must be a whole number of slots in [1, --circle-every], got {circle_window}")
     rows, results, distance = [], [], []
     keys = jax.random.split(jax.random.key(0), episodes)
 
@@ -541,6 +549,7 @@ def run(
                     random_phase=random_phase,
                     entry_memory=entry_memory if (lying and near) else 0.0,
                     circle_every=circle_every if lying else 1,
+                    circle_window=circle_window if lying else 1,
                 )
                 for vision in (True, False)
             )
@@ -602,7 +611,7 @@ def write_figures(out: Path, recorded, key, names: list[str]) -> None:
         keys = jnp.stack([key] * len(chosen))
         rec = pipe_figures.record(env, keys, first, _switch_params(machine, "bang-bang", len(chosen)), slots)
         for i, name in enumerate(chosen):
-            episodes[name] = (name, lying, pipe_figures.lane(rec, i), env.circle_every)
+            episodes[name] = (name, lying, pipe_figures.lane(rec, i), env.circle_window)
     episodes = [episodes[name] for name in names if name in episodes]
     stats = pipe_figures.camera_offset_figure(out / "snake_pipe_camera_offset.png")
     write_csv(
@@ -687,6 +696,14 @@ def _add_arguments(parser) -> None:
         f"slot; N divides {SEGMENT})",
     )
     parser.add_argument(
+        "--circle-window",
+        type=int,
+        default=None,
+        metavar="W",
+        help="each circle-grid update sees the events of the last W of its --circle-every slots (default "
+        f"{CIRCLE_WINDOW}, or --circle-every when that is smaller)",
+    )
+    parser.add_argument(
         "--figures",
         action=argparse.BooleanOptionalAction,
         default=True,
@@ -726,6 +743,7 @@ def reproduce_command_run(
     random_phase: bool = RANDOM_PHASE,
     entry_memory: float = ENTRY_MEMORY,
     circle_every: int = CIRCLE_EVERY,
+    circle_window: int | None = None,
     figures: bool = True,
 ) -> int:
     """``spikejax reproduce snake-pipe --out DIR [--episodes N] [--seconds S] [--scene FILE] [--baselines B]``."""
@@ -748,6 +766,7 @@ def reproduce_command_run(
             random_phase=random_phase,
             entry_memory=entry_memory,
             circle_every=circle_every,
+            circle_window=circle_window,
             figures=figures,
         )
         for r in rows:

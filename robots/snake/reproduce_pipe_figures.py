@@ -99,7 +99,7 @@ def camera_offset_figure(path: Path, run=None, periods: float = OFFSET_PERIODS) 
 
 
 @functools.cache
-def _recorder(env, every_slots: int, slots: int):
+def _recorder(env, slots: int):
     """The jitted, lane-vmapped recording of ``slots`` slots of ``env`` under `robots.snake.pipe_controller.switch`."""
     from robots.snake import pipe_controller as pc
     from robots.snake import pipe_env
@@ -109,16 +109,16 @@ def _recorder(env, every_slots: int, slots: int):
     det = env.tracker.detector
     k = env.slot_steps
 
-    def one(carry, params, end, circle_update):
+    def one(carry, params, end, circle_update=True, keep_events=True):
         s, c = carry
         c, action = act(params, c, s)
-        s = env.step(s, action, slot_end=end, circle_update=circle_update)
+        s = env.step(s, action, slot_end=end, circle_update=circle_update, keep_events=keep_events)
         positive, negative = detect.event_images(det, s.info["events"])
         return (s, c), positive - negative
 
-    def slot(carry, params, circle_update):
-        carry, images = jax.lax.scan(lambda c, _: one(c, params, False, True), carry, None, length=k - 1)
-        carry, image = one(carry, params, True, circle_update)
+    def slot(carry, params, schedule):
+        carry, images = jax.lax.scan(lambda c, _: one(c, params, False), carry, None, length=k - 1)
+        carry, image = one(carry, params, True, *schedule)
         s = carry[0]
         out = s.info["slot"]
         rec = {
@@ -138,12 +138,12 @@ def _recorder(env, every_slots: int, slots: int):
 
         def group(carry, _):
             recs = []
-            for i in range(every_slots):
-                carry, rec = slot(carry, params, i == every_slots - 1)
+            for schedule in env.circle_schedule():
+                carry, rec = slot(carry, params, schedule)
                 recs.append(rec)
             return carry, jax.tree.map(lambda *a: jnp.stack(a), *recs)
 
-        _, rec = jax.lax.scan(group, carry, None, length=slots // every_slots)
+        _, rec = jax.lax.scan(group, carry, None, length=slots // env.circle_every)
         return jax.tree.map(lambda a: a.reshape((slots,) + a.shape[2:]), rec)
 
     return jax.jit(jax.vmap(episode))
@@ -166,7 +166,7 @@ def record(env, keys, scenes, params, slots: int) -> dict:
             env, keys[fill], jax.tree.map(lambda a: a[fill], scenes), jax.tree.map(lambda a: a[fill], params), slots
         )
         return jax.tree.map(lambda a: a[:n], rec)
-    return jax.tree.map(np.asarray, _recorder(env, every, slots)(keys, scenes, params))
+    return jax.tree.map(np.asarray, _recorder(env, slots)(keys, scenes, params))
 
 
 def lane(rec: dict, i: int) -> dict:
@@ -200,10 +200,10 @@ def pick_slots(depth: np.ndarray, candidates: np.ndarray, panels: int = PANELS) 
 
 
 def detections_figure(path: Path, episodes: list[tuple[str, bool, dict, int]]) -> None:
-    """Fig. 6's counterpart: one row per ``(name, lying, lane record, circle_every)``, `PANELS` columns (`pick_slots`).
+    """Fig. 6's counterpart: one row per ``(name, lying, lane record, window)``, `PANELS` columns (`pick_slots`).
 
-    A lying pipe's entry is found on the events since the circle grid's last
-    update (``circle_every`` slots), so its panel sums those slots' images.
+    A lying pipe's entry is found on the events of the last ``window`` slots
+    (the env's ``circle_window``), so its panel sums those slots' images.
     """
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
@@ -212,7 +212,7 @@ def detections_figure(path: Path, episodes: list[tuple[str, bool, dict, int]]) -
 
     fig = Figure(figsize=(2.6 * PANELS, 2.8 * len(episodes)))
     axes = fig.subplots(len(episodes), PANELS, squeeze=False)
-    for row, (name, lying, rec, every) in zip(axes, episodes):
+    for row, (name, lying, rec, window) in zip(axes, episodes):
         idx, _, _ = target_detections(rec, lying)
         size = rec["image"].shape[2], rec["image"].shape[1]
         chosen = pick_slots(rec["depth"], idx)
@@ -224,7 +224,7 @@ def detections_figure(path: Path, episodes: list[tuple[str, bool, dict, int]]) -
                 ax.axis("off" if chosen else "on")
                 continue
             j = chosen[i]
-            span = every if lying else 1
+            span = window if lying else 1
             image = rec["image"][max(0, j - span + 1) : j + 1].astype(np.float32).sum(0)
             lim = max(1.0, float(np.abs(image).max()))
             ax.imshow(image, cmap="bwr", vmin=-lim, vmax=lim, interpolation="nearest")

@@ -344,7 +344,12 @@ def due(params: TrackerParams, state: TrackerState) -> jax.Array:
 
 
 def slot_end(
-    tracker: Tracker, params: TrackerParams, state: TrackerState, t, circle_update: bool = True
+    tracker: Tracker,
+    params: TrackerParams,
+    state: TrackerState,
+    t,
+    circle_update: bool = True,
+    keep_events: bool = True,
 ) -> tuple[TrackerState, SlotOutput]:
     """The slot's end: Alg. 2 on its tallies, Alg. 3 on the detections, the control; a new slot begins.
 
@@ -357,6 +362,9 @@ def slot_end(
             end (a tracker with ``circle_per_slot`` and no line grid): no
             update, no entry (Alg. 3 sees no detection), and the slot's event
             image carries over, so the next update takes both slots' events.
+        keep_events: static; with ``circle_update=False``, ``False`` drops the
+            slot's event image (and any carried into it) instead: the next
+            update sees only the slots after this one.
 
     Returns:
         ``(state, output)``: the state with empty slot tallies (the grids and
@@ -393,7 +401,7 @@ def slot_end(
     misses = jnp.where(seen, 0, state.misses + 1)
     control = jnp.where(seen, control, jnp.where(misses <= params.hold, state.control, 0)).astype(jnp.int32)
     line_spikes, line_votes, circle_counts, circle_votes, image = _slot_tallies(det)
-    image = state.image if skip else image
+    image = state.image if (skip and keep_events) else image
     new = state._replace(
         grids=detect.DetectorState(state.grids.line, circle),
         line_spikes=line_spikes,
