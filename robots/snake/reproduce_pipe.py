@@ -12,7 +12,7 @@ paper detects them (`robots.snake.pipe_env.default_tracker`), the lying
 ones' grid extended for the last metre and steered by to the end (``--near``,
 `robots.snake.pipe_controller.machine_params`), the entry remembered in the
 world between detections (``--entry-memory``) and the circle grid updated
-every ``--circle-every`` slots. The first ``--baselines``
+every ``--circle-every`` slots on the events of the last ``--circle-window``. The first ``--baselines``
 episodes of each situation run again, the same placements and keys, going
 straight and with the privileged controller (the true side of the pipe):
 the lower and upper bounds of the bang-bang law. They read only the truth,
@@ -130,10 +130,12 @@ RANDOM_PHASE = True
 # (docs/BENCHMARKS.md). 0: off.
 ENTRY_MEMORY = 0.3
 # The lying pipes' circle grid updates every CIRCLE_EVERY slots (`robots.snake.pipe_env.PipeEnv`'s
-# ``circle_every``), the remembered entry steering between: on the 32 lying placements a side of
-# ``--episodes 32`` the same 26 / 25 entered as with every slot, 164.5 against 220.8 s a side on one core; on
-# 256 a side 378 against 390 of 512 (docs/BENCHMARKS.md).
-CIRCLE_EVERY = 2
+# ``circle_every``), the remembered entry steering between, on the events of the last CIRCLE_WINDOW slots
+# (``circle_window``; the earlier ones dropped). On the 256 lying placements a side (entered of 512, mean |Eq. (8)
+# distance - depth| of the entry at 0.5-3 m, the lying queue's wall time on one day): every slot 390; every 2
+# slots 378, 0.24 m, 15:25; every 4 on all 4 slots 404, 0.31 m, 10:48; every 4 on the last 2 slots 407, 0.24 m,
+# 10:16 (docs/BENCHMARKS.md): the update's cost halved, the entry's distance error that of a 2-slot update.
+CIRCLE_EVERY = 4
 CIRCLE_WINDOW = 2
 MIN_LANES = 2
 """The fewest lanes `_episodes` runs on a device: XLA compiles a batch of one lane (its axis of size 1 folded away)
