@@ -109,3 +109,33 @@ def test_recorded_episode_is_the_rollouts_trial():
     assert found.sum() > 0
     np.testing.assert_array_equal(rec["body_distance"][found], np.asarray(ref["metrics"]["d_est"])[:, ends][found])
     assert rec["image"].shape == (2, slots, 128, 128) and np.abs(rec["image"]).sum() > 0
+
+
+@pytest.mark.slow  # about 60 s
+def test_recorded_lying_episode_follows_the_circle_schedule_as_the_rollout():
+    """With the circle grid every 4 slots on the last 2 slots' events, `record` is `pipe_env.rollout`'s trial."""
+    from robots.snake import pipe_controller as pc
+    from robots.snake import pipe_env, pipes
+
+    slots = 16
+    tracker = pipe_env.default_tracker(circle=True, line=False, circle_bin=2, near=True)
+    env = pipe_env.PipeEnv(
+        situation="lying-right",
+        tracker=tracker,
+        max_steps=slots * 5,
+        random_phase=True,
+        entry_memory=0.3,
+        circle_every=4,
+        circle_window=2,
+    )
+    keys = jax.random.split(jax.random.key(5), 2)
+    scenes = jax.vmap(lambda k: pipes.sample(k, pipes.LYING, pipes.RIGHT))(keys)
+    params = pc.SwitchParams(pc.machine_params(True, near=True), jnp.zeros(2, jnp.int32))
+    params = jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (2,)), params)
+    rec = pf.record(env, keys, scenes, params, slots)
+    ref, _ = jax.jit(jax.vmap(lambda k, s, p: pipe_env.rollout(env, pc.switch, p, k, slots, s)))(keys, scenes, params)
+    ends = np.arange(slots) * 5 + 4
+    np.testing.assert_array_equal(rec["depth"], np.asarray(ref["metrics"]["depth"])[:, ends])
+    found = rec["entry"].valid
+    assert found.any() and not found[:, np.arange(slots) % 4 != 3].any()  # entries, only at the updates
+    np.testing.assert_array_equal(rec["entry_distance"][found], np.asarray(ref["metrics"]["d_est"])[:, ends][found])
