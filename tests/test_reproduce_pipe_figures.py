@@ -88,6 +88,22 @@ def test_lane_cuts_at_the_end_and_detections_are_of_the_targets_kind():
     assert idx.tolist() == [2] and distance.tolist() == [1.2]
 
 
+def _recorded_and_rolled_out(env, kind, side, controller, slots: int):
+    """Two lanes of ``env`` recorded by `record` and run by `pipe_env.rollout` on the same keys and scenes:
+    ``(record, the rollout's per-slot depth, Alg. 3 distance)`` (the rollout's record at each slot's last step)."""
+    from robots.snake import pipe_controller as pc
+    from robots.snake import pipe_env, pipes
+
+    keys = jax.random.split(jax.random.key(5), 2)
+    scenes = jax.vmap(lambda k: pipes.sample(k, kind, side))(keys)
+    params = pc.SwitchParams(controller, jnp.zeros(2, jnp.int32))
+    params = jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (2,)), params)
+    rec = pf.record(env, keys, scenes, params, slots)
+    ref, _ = jax.jit(jax.vmap(lambda k, s, p: pipe_env.rollout(env, pc.switch, p, k, slots, s)))(keys, scenes, params)
+    ends = np.arange(slots) * env.slot_steps + env.slot_steps - 1
+    return rec, np.asarray(ref["metrics"]["depth"])[:, ends], np.asarray(ref["metrics"]["d_est"])[:, ends]
+
+
 @pytest.mark.slow  # about 45 s: the recording and the rollout compiled
 def test_recorded_episode_is_the_rollouts_trial():
     """The figures' episodes are the run's: `record` gives, slot by slot, the true depth and Alg. 3's distance of
@@ -97,17 +113,11 @@ def test_recorded_episode_is_the_rollouts_trial():
 
     slots = 12
     env = pipe_env.PipeEnv(max_steps=slots * 5, random_phase=True)
-    keys = jax.random.split(jax.random.key(5), 2)
-    scenes = jax.vmap(lambda k: pipes.sample(k, pipes.STANDING, pipes.RIGHT))(keys)
-    params = pc.SwitchParams(pc.ControllerParams(), jnp.zeros(2, jnp.int32))
-    params = jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (2,)), params)
-    rec = pf.record(env, keys, scenes, params, slots)
-    ref, _ = jax.jit(jax.vmap(lambda k, s, p: pipe_env.rollout(env, pc.switch, p, k, slots, s)))(keys, scenes, params)
-    ends = np.arange(slots) * 5 + 4
-    np.testing.assert_array_equal(rec["depth"], np.asarray(ref["metrics"]["depth"])[:, ends])
+    rec, depth, distance = _recorded_and_rolled_out(env, pipes.STANDING, pipes.RIGHT, pc.ControllerParams(), slots)
+    np.testing.assert_array_equal(rec["depth"], depth)
     found = rec["body"].valid
     assert found.sum() > 0
-    np.testing.assert_array_equal(rec["body_distance"][found], np.asarray(ref["metrics"]["d_est"])[:, ends][found])
+    np.testing.assert_array_equal(rec["body_distance"][found], distance[found])
     assert rec["image"].shape == (2, slots, 128, 128) and np.abs(rec["image"]).sum() > 0
 
 
@@ -128,14 +138,9 @@ def test_recorded_lying_episode_follows_the_circle_schedule_as_the_rollout():
         circle_every=4,
         circle_window=2,
     )
-    keys = jax.random.split(jax.random.key(5), 2)
-    scenes = jax.vmap(lambda k: pipes.sample(k, pipes.LYING, pipes.RIGHT))(keys)
-    params = pc.SwitchParams(pc.machine_params(True, near=True), jnp.zeros(2, jnp.int32))
-    params = jax.tree.map(lambda a: jnp.broadcast_to(jnp.asarray(a), (2,)), params)
-    rec = pf.record(env, keys, scenes, params, slots)
-    ref, _ = jax.jit(jax.vmap(lambda k, s, p: pipe_env.rollout(env, pc.switch, p, k, slots, s)))(keys, scenes, params)
-    ends = np.arange(slots) * 5 + 4
-    np.testing.assert_array_equal(rec["depth"], np.asarray(ref["metrics"]["depth"])[:, ends])
+    controller = pc.machine_params(True, near=True)
+    rec, depth, distance = _recorded_and_rolled_out(env, pipes.LYING, pipes.RIGHT, controller, slots)
+    np.testing.assert_array_equal(rec["depth"], depth)
     found = rec["entry"].valid
     assert found.any() and not found[:, np.arange(slots) % 4 != 3].any()  # entries, only at the updates
-    np.testing.assert_array_equal(rec["entry_distance"][found], np.asarray(ref["metrics"]["d_est"])[:, ends][found])
+    np.testing.assert_array_equal(rec["entry_distance"][found], distance[found])
