@@ -296,8 +296,8 @@ class PipeEnv(Env):
             whether there is one; `robots.snake.pipe_controller`'s ``memory``
             steers by it.
         circle_every: the circle grid updates at every ``circle_every``-th
-            slot's end in `rollout` (on the events of the slots since its
-            last update; `spikejax.vision.stream.slot_end`'s
+            slot's end in `rollout` (on the events of its last
+            ``circle_window`` slots; `spikejax.vision.stream.slot_end`'s
             ``circle_update``), for a tracker with ``circle_per_slot`` and no
             line grid; 1 (default): every slot. The other slot ends detect
             nothing; the controller still acts at each (the remembered entry
