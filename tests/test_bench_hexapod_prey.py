@@ -33,3 +33,18 @@ def test_c_physics_walks_the_pool_and_its_row_counts_decisions():
     assert row["decisions"] == 6 and row["decisions_per_s"] == pytest.approx(6 / row["run_s"])
     assert row["physics_steps_per_s"] == pytest.approx(160 * row["decisions_per_s"])
     assert row["sim_s_per_wall_s"] == pytest.approx(0.32 * row["decisions_per_s"]) and math.isnan(row["x_numpy"])
+
+
+def test_the_snn_row_runs_the_loops_network_on_the_numpy_peers_input():
+    """`SnnRun` sums each decision's winning gait and filter spikes: `decide`'s, on the same counts, every time."""
+    track, scene, key = bp.recorded_decision()
+    d = jax.jit(decisions.decide)(track, scene, key)
+    run = bp.SnnRun(2, 3)
+    assert run() > 0
+    total = np.asarray(run.compiled(*run.args))
+    # Each of the three decisions starts at rest one gait cycle later: the same network makes the same spikes.
+    assert int(d.filter_spikes) > 0
+    assert np.all(total == 3 * (int(d.gait) + int(d.filter_spikes)))
+    row = run.info
+    assert row["impl"] == "spikejax visual SNN only" and row["decisions"] == 6
+    assert row["decisions_per_s"] == pytest.approx(6 / row["run_s"])

@@ -27,6 +27,12 @@ timed in the same run, at batch sizes 1 to 1,024, each on one core and on all:
   (`robots.hexapod.decisions.decide`) along recorded tracks, no physics: what
   the loop spends beside the C engine. One CPU device, and the batch split
   over one device a core (`spikejax.devices.shard_batch`).
+- ``spikejax visual SNN only``: the loop's visual SNN alone (`SnnRun`) on
+  the NumPy peer's input, the recorded decision's events counted per frame:
+  the like-for-like row for the NumPy SNN. The loop runs the network once a
+  frame on the frame's counts (`spikejax.vision.edges.sync_step`), the NumPy
+  one event by event (the spikes differ where a frame's events would cross
+  a threshold between them); the devices as for the vision.
 
 Compile time is reported apart from run time (the fastest of ``--repeats``
 runs; the implementations of a batch are timed once a round,
@@ -74,8 +80,10 @@ __all__ = [
     "CPhysicsRun",
     "ClosedLoopRun",
     "NumpyVisionRun",
+    "SnnRun",
     "VisionRun",
     "command",
+    "decision_counts",
     "recorded_decision",
     "run",
 ]
@@ -265,10 +273,13 @@ class VisionRun:
         tracks, scenes = jax.tree.map(lambda a: jnp.broadcast_to(a, (batch, *a.shape)), (track, scene))
 
         def one(k, tr, sc):
-            def body(events, kk):
-                return events + decisions.decide(tr, sc, kk).events, None
+            def body(sums, kk):
+                # The gaits too: XLA drops the whole visual SNN from a program whose result is the events alone.
+                d = decisions.decide(tr, sc, kk)
+                return (sums[0] + d.events, sums[1] + d.gait + d.gait_ordered), None
 
-            return jax.lax.scan(body, jnp.zeros((), jnp.int32), jax.random.split(k, steps))[0]
+            zero = jnp.zeros((), jnp.int32)
+            return jax.lax.scan(body, (zero, zero), jax.random.split(k, steps))[0]
 
         self.batch, self.steps, self.devices, self.args = batch, steps, devices, (keys, tracks, scenes)
         fn = shard_batch(jax.vmap(one), jax.devices()[:devices])
@@ -277,7 +288,7 @@ class VisionRun:
 
     def __call__(self) -> float:
         t0 = time.perf_counter()
-        events = jax.block_until_ready(self.compiled(*self.args))
+        events, _ = jax.block_until_ready(self.compiled(*self.args))
         seconds = time.perf_counter() - t0
         if not bool(jnp.all(events > 0)):
             raise RuntimeError("the vision saw no events")
@@ -289,14 +300,21 @@ class VisionRun:
         return _row("spikejax vision only", self.batch, self.steps, self.compile_s, self.run_s, self.devices, "device")
 
 
-def decision_events() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The recorded decision's DVS events ``(xs, ys, ts)``: each frame's counts as that many events at its time."""
+def decision_counts() -> np.ndarray:
+    """The recorded decision's DVS events counted per pixel, one image a frame interval: ``(N_FRAMES - 1, h, w)``."""
     from robots.hexapod import decisions
 
     track, scene, key = recorded_decision()
     # Track and scene as arguments: as constants XLA would render them at compile time.
     _, (counts, _) = jax.jit(lambda *a: decisions.decide(*a, with_spikes=True))(track, scene, key)
-    counts = np.asarray(counts)
+    return np.asarray(counts)
+
+
+def decision_events() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The recorded decision's DVS events ``(xs, ys, ts)``: each frame's counts as that many events at its time."""
+    from robots.hexapod import decisions
+
+    counts = decision_counts()
     xs, ys, ts = [], [], []
     for k, image in enumerate(counts, start=1):
         y, x = np.nonzero(image)
@@ -304,6 +322,61 @@ def decision_events() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         xs.append(np.repeat(x, n)), ys.append(np.repeat(y, n))
         ts.append(np.full(int(n.sum()), k * decisions.FRAME_S))
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(ts)
+
+
+class SnnRun:
+    """The visual SNN alone, as the loop runs it, on the NumPy peer's input, ``batch`` members ``steps`` times, as a timer.
+
+    `spikejax.vision.edges.sync_step` once a frame over `decision_counts` (the
+    count images whose events `NumpyVisionRun` gets), from rest, and the
+    winner-take-all: what `decisions.decide` does after its DVS. Decision ``k``
+    runs ``k`` gait cycles later in time (the same network: each starts at
+    rest), so that no run repeats another's arithmetic for XLA to hoist.
+    """
+
+    def __init__(self, batch: int, steps: int, devices: int = 1):
+        from robots.hexapod import camera as cam
+        from robots.hexapod import decisions
+        from robots.hexapod.env import STEP_S
+        from robots.hexapod.vision import FORWARD, vision_params
+        from spikejax.vision import edges
+
+        config, params = cam.EDGE_CONFIG, vision_params(cam.EDGE_CONFIG)
+        counts = jnp.asarray(decision_counts(), jnp.int32)
+        frame_t = jnp.arange(1, counts.shape[0] + 1, dtype=jnp.float32) * decisions.FRAME_S
+
+        def one(images):
+            def decide(total, k):
+                t0 = k.astype(jnp.float32) * STEP_S
+
+                def frame(snn, x):
+                    return edges.sync_step(config, params, snn, *x)[0], None
+
+                snn = jax.lax.scan(frame, edges.init(config, t0), (images, t0 + frame_t))[0]
+                return total + edges.winner(snn.counts["out"], jnp.int32(FORWARD)) + snn.counts["filter"], None
+
+            return jax.lax.scan(decide, jnp.zeros((), jnp.int32), jnp.arange(steps))[0]
+
+        self.batch, self.steps, self.devices = batch, steps, devices
+        self.args = (jnp.broadcast_to(counts, (batch, *counts.shape)),)
+        fn = shard_batch(jax.vmap(one), jax.devices()[:devices])
+        self.compiled, self.compile_s = compile_ahead(fn, *self.args)
+        self.run_s = math.inf
+
+    def __call__(self) -> float:
+        t0 = time.perf_counter()
+        total = jax.block_until_ready(self.compiled(*self.args))
+        seconds = time.perf_counter() - t0
+        if not bool(jnp.all(total > 0)):
+            raise RuntimeError("the visual SNN made no filter spike")
+        self.run_s = min(self.run_s, seconds)
+        return seconds
+
+    @property
+    def info(self) -> dict:
+        return _row(
+            "spikejax visual SNN only", self.batch, self.steps, self.compile_s, self.run_s, self.devices, "device"
+        )
 
 
 class NumpyVisionRun:
@@ -416,6 +489,7 @@ def run(
                     if batch >= p:
                         runs["loop", p] = ClosedLoopRun(batch, n_loop, threads=p)
                         runs["vision", p] = VisionRun(batch, n_loop, p)
+                        runs["snn", p] = SnnRun(batch, n_loop, p)
                 if i == 0:
                     runs.update({("numpy", p): pool for p, pool in numpy_pools.items()})
                 best = interleaved(runs, repeats)

@@ -286,9 +286,13 @@ def sync_step(config: EdgeConfig, params: EdgeParams, state: EdgeState, image, t
     t = jnp.asarray(t, jnp.float32)
     drive, near = _filter_drive(params, jnp.asarray(image, jnp.int32))
     filt, s_f = _update(state.filter, near, drive, t, params.tau_filter, params.v_th)
-    s_used = s_f[:rows, :cols].astype(jnp.int32)
-    n_col = s_used.reshape(n_rows, win, cols).sum(1)
-    n_row = s_used.reshape(rows, n_cols, win).sum(2)
+    # The window sums as reduce-windows: XLA materialises their operand once, where sums of a reshape let it
+    # recompute the filter layer's update inside each of them (docs/BENCHMARKS.md).
+    s_int = s_f.astype(jnp.int32)
+    by_rows = jax.lax.reduce_window(s_int, 0, jax.lax.add, (win, 1), (win, 1), "VALID")  # (n_rows, width)
+    n_col = by_rows[:, :cols]
+    n_row = jax.lax.reduce_window(s_int, 0, jax.lax.add, (1, win), (1, win), "VALID")[:rows]  # (height, n_cols)
+    n_filter = jnp.sum(by_rows) + jnp.sum(s_int[rows:])
     vert, s_v = _update(state.vertical, n_col > 0, params.column * n_col, t, params.tau_column, params.v_th)
     horz, s_h = _update(state.horizontal, n_row > 0, params.column * n_row, t, params.tau_column, params.v_th)
     n_win = jnp.stack(
@@ -301,17 +305,18 @@ def sync_step(config: EdgeConfig, params: EdgeParams, state: EdgeState, image, t
     wins, s_w = _update(state.windows, n_win > 0, params.window * n_win, t, params.tau_window, params.v_th)
     out_drive = _readout_drive(params, s_w)
     out, s_o = _update(state.out, jnp.any(s_w), out_drive, t, params.tau_out, params.v_th)
-    counts = _count(state.counts, jnp.sum(image), s_f, s_v, s_h, s_w, s_o)
+    counts = _count(state.counts, jnp.sum(image), n_filter, s_v, s_h, s_w, s_o)
     return EdgeState(filt, vert, horz, wins, out, counts), Spikes(s_f, s_v, s_h, s_w, s_o)
 
 
-def _count(counts, n_events, s_f, s_v, s_h, s_w, s_o) -> dict:
+def _count(counts, n_events, n_filter, s_v, s_h, s_w, s_o) -> dict:
+    """``counts`` plus one step's: ``n_filter`` the filter layer's spikes, the other layers' as booleans."""
     i32 = lambda a: jnp.sum(a, dtype=jnp.int32)
     return {
         "windows": counts["windows"] + s_w.astype(jnp.int32),
         "out": counts["out"] + s_o.astype(jnp.int32),
         "events": counts["events"] + jnp.asarray(n_events, jnp.int32),
-        "filter": counts["filter"] + i32(s_f),
+        "filter": counts["filter"] + jnp.asarray(n_filter, jnp.int32),
         "layer2": counts["layer2"] + i32(s_v) + i32(s_h),
     }
 
@@ -369,7 +374,7 @@ def _one_event(config: EdgeConfig, params: EdgeParams, state: EdgeState, x, y, t
     )
     fired_windows = jnp.zeros(state.windows.v.shape, bool).at[wr, wc, branch].max(s_w, mode="drop")
     out, s_o = _update(state.out, jnp.any(s_w), _readout_drive(params, fired_windows), t, params.tau_out, params.v_th)
-    counts = _count(state.counts, valid, s_f, s_v, s_h, fired_windows, s_o)
+    counts = _count(state.counts, valid, jnp.sum(s_f, dtype=jnp.int32), s_v, s_h, fired_windows, s_o)
     return EdgeState(filt, vert, horz, wins, out, counts)
 
 
