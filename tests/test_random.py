@@ -1,10 +1,11 @@
-"""The counter-based uniform generator: uniform, serially uncorrelated, keyed."""
+"""The counter-based uniform generator: uniform, serially uncorrelated, keyed; and JAX's own, drawn in one pass."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
-from spikejax.random import hash_seed, hash_uniform
+from spikejax.random import hash_seed, hash_uniform, threefry_uniform
 
 N = 1 << 20
 
@@ -48,3 +49,22 @@ def test_keys_give_independent_streams():
         hash_uniform(hash_seed(key=jax.random.fold_in(jax.random.key(0), 2)), jnp.arange(N, dtype=jnp.uint32))
     )
     assert abs(np.corrcoef(c, d)[0, 1]) < 4 / np.sqrt(N)
+
+
+@pytest.mark.parametrize("shape", [(1,), (7,), (3, 5, 2), (160, 256)])
+@pytest.mark.parametrize("make_key", [jax.random.key, jax.random.PRNGKey], ids=["typed", "raw"])
+def test_threefry_uniform_is_jax_random_uniform_bit_for_bit(shape, make_key):
+    for seed in (0, 5, 2**31 + 3):
+        key = jax.random.fold_in(make_key(seed), 11)
+        for low, high in ((0.0, 1.0), (1e-6, 1.0), (-2.0, 3.5)):
+            ours = jax.jit(lambda k, lo=low, hi=high: threefry_uniform(k, shape, lo, hi))(key)
+            theirs = jax.jit(lambda k, lo=low, hi=high: jax.random.uniform(k, shape, jnp.float32, lo, hi))(key)
+            assert ours.dtype == jnp.float32 and ours.shape == shape
+            np.testing.assert_array_equal(np.asarray(ours), np.asarray(theirs))
+
+
+def test_threefry_uniform_passes_other_generators_to_jax():
+    key = jax.random.key(3, impl="rbg")
+    np.testing.assert_array_equal(
+        np.asarray(threefry_uniform(key, (4, 3))), np.asarray(jax.random.uniform(key, (4, 3), jnp.float32))
+    )

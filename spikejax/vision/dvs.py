@@ -35,6 +35,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from spikejax.random import threefry_uniform
 from spikejax.vision.events import Events, compact
 
 __all__ = [
@@ -231,9 +232,10 @@ def _interval(params: DVSParams, state: DVSState, frame, t, max_per_pixel: int, 
     size = frame.size
     k_noise, k_pol, k_time = jax.random.split(key, 3)
     p_noise = -jnp.expm1(-params.noise_rate * (t - t0))
-    noise = jax.random.uniform(k_noise, (size,)) < p_noise
-    noise_pol = jnp.where(jax.random.bernoulli(k_pol, 0.5, (size,)), 1, -1).astype(jnp.int32)
-    noise_t = t0 + (t - t0) * jax.random.uniform(k_time, (size,), minval=1e-6, maxval=1.0)
+    # `threefry_uniform` is `jax.random.uniform` (the same numbers), drawn in one pass on a CPU.
+    noise = threefry_uniform(k_noise, (size,)) < p_noise
+    noise_pol = jnp.where(threefry_uniform(k_pol, (size,)) < 0.5, 1, -1).astype(jnp.int32)
+    noise_t = t0 + (t - t0) * threefry_uniform(k_time, (size,), 1e-6, 1.0)
     new_state = DVSState(
         reference=ref + direction * n * c,
         log_frame=log_frame,
