@@ -110,6 +110,21 @@ def test_vmap_over_scenes_equals_single_runs(fixed_decisions):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[i])
 
 
+def test_a_batch_decided_in_chunks_is_decided_as_a_whole(monkeypatch):
+    """Six members on a CPU: chunks of four and the remaining two (`decisions.DECIDE_CHUNK`), or all six at once."""
+    track = jnp.asarray(decisions.g1_step_tracks([(0.8, 1.0, 1.0)])[0])
+    scene = _scene((float(cam.ground_pose(track[0])[0]) + 0.5, 0.1, True))
+    keys = jax.random.split(jax.random.key(4), 6)
+    runs = {}
+    for chunk in (4, 10**9):
+        monkeypatch.setattr(decisions, "DECIDE_CHUNK", chunk)
+        runs[chunk] = jax.jit(jax.vmap(decisions.decide, in_axes=(None, None, 0)))(track, scene, keys)
+    assert int(np.asarray(runs[4].events).min()) > 0
+    assert len(set(np.asarray(runs[4].events).tolist())) > 1  # the members' noise differs
+    for a, b in zip(jax.tree.leaves(runs[4]), jax.tree.leaves(runs[10**9])):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
 def test_capacity_scales_with_the_pixels():
     assert decisions.capacity(cam.EDGE_CONFIG) == decisions.CAPACITY
     assert decisions.capacity(PAPER_SENSOR) == 25 * decisions.CAPACITY

@@ -34,6 +34,7 @@ whatever the batch.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -193,7 +194,45 @@ def decide(
     `camera.LENSES`): where the optical axis meets the sensor. ``wiring``
     (static, `robots.hexapod.vision.WIRINGS`): the readout onto the gait
     neurons; the ordered readout takes the excitatory synapses only.
+
+    Under ``vmap`` on a CPU the members run `DECIDE_CHUNK` at a time (each
+    member's decision is the same whatever the batch).
     """
+    return _chunked(bool(with_spikes), config, lens, wiring)(track, scene, key)
+
+
+DECIDE_CHUNK = 4
+"""Members `decide` runs at a time under ``vmap`` on a CPU (``lax.map`` over chunks): the DVS's and the SNN's
+image-sized arrays of a few members stay in the cache, those of a whole batch do not. At a batch of 256 on one core
+a decision of the vision took 1.45x as long whole as in chunks of 4 (1.27x against chunks of 16), the closed loop's
+1.39x (docs/BENCHMARKS.md)."""
+
+
+@functools.cache
+def _chunked(with_spikes: bool, config: edges.EdgeConfig, lens: str, wiring: str):
+    """`_decide` for these static arguments, batched by ``vmap`` in chunks of `DECIDE_CHUNK` on a CPU."""
+
+    def one(track, scene, key):
+        return _decide(track, scene, key, with_spikes, config, lens, wiring)
+
+    batched = jax.custom_batching.custom_vmap(one)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        args = jax.tree.map(
+            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size, *jnp.shape(a))), args, tuple(in_batched)
+        )
+        if jax.default_backend() == "cpu" and axis_size > DECIDE_CHUNK:
+            out = jax.lax.map(lambda a: one(*a), args, batch_size=DECIDE_CHUNK)
+        else:
+            out = jax.vmap(one)(*args)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return batched
+
+
+def _decide(track, scene, key, with_spikes: bool, config: edges.EdgeConfig, lens: str, wiring: str):
+    """`decide` for one member."""
     params = vision_params(config, wiring)
     cap = capacity(config)
     camera = cam.sensor_camera(config, lens)
