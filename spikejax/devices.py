@@ -30,7 +30,7 @@ import numpy as np
 
 from spikejax.errors import UserError
 
-__all__ = ["use_cpu_devices", "cpu_devices_for_run", "shard_batch", "BatchSplit"]
+__all__ = ["use_cpu_devices", "cpu_devices_for_run", "shard_batch", "BatchSplit", "in_chunks_on_cpu"]
 
 
 def use_cpu_devices(n: int) -> None:
@@ -175,3 +175,29 @@ def shard_batch(fn: Callable, devices=None, *, in_axes: Any = 0) -> BatchSplit:
         UserError: when called, if the batched arguments' leading axes differ.
     """
     return BatchSplit(fn, list(jax.devices() if devices is None else devices), in_axes)
+
+
+def in_chunks_on_cpu(fn: Callable, chunk: int | None = None) -> Callable:
+    """``fn`` (written for one member, positional array arguments), batched under ``vmap`` in chunks on a CPU.
+
+    On a CPU a ``vmap`` batch runs ``chunk`` members at a time (``lax.map``
+    over chunks; None: one at a time): each pass over a member's arrays then
+    stays in the cache, where a whole batch's arrays outgrow it (the Hough
+    streams' scatters, the hexapod's vision; docs/BENCHMARKS.md). A batch of at
+    most ``chunk`` members, and every other backend, is ``vmap``ped whole. Each
+    member's result is the same either way.
+    """
+    batched = jax.custom_batching.custom_vmap(fn)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        args = jax.tree.map(
+            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size, *jnp.shape(a))), args, tuple(in_batched)
+        )
+        if jax.default_backend() != "cpu" or (chunk is not None and axis_size <= chunk):
+            out = jax.vmap(fn)(*args)
+        else:
+            out = jax.lax.map(lambda a: batched(*a), args, batch_size=chunk)  # an outer vmap meets the rule again
+        return out, jax.tree.map(lambda _: True, out)
+
+    return batched

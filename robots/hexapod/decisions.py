@@ -47,6 +47,7 @@ from robots.hexapod import prey as prey_mod
 from robots.hexapod.gaits import PERIOD, required_spikes
 from robots.hexapod.legs import servo_targets, step_params
 from robots.hexapod.vision import FORWARD, WIRING, vision_params
+from spikejax.devices import in_chunks_on_cpu
 from spikejax.vision import dvs, edges
 
 __all__ = [
@@ -198,7 +199,7 @@ def decide(
     Under ``vmap`` on a CPU the members run `DECIDE_CHUNK` at a time (each
     member's decision is the same whatever the batch).
     """
-    return _chunked(bool(with_spikes), config, lens, wiring)(track, scene, key)
+    return _chunked(bool(with_spikes), config, lens, wiring, DECIDE_CHUNK)(track, scene, key)
 
 
 DECIDE_CHUNK = 4
@@ -209,26 +210,11 @@ a decision of the vision took 1.45x as long whole as in chunks of 4 (1.27x again
 
 
 @functools.cache
-def _chunked(with_spikes: bool, config: edges.EdgeConfig, lens: str, wiring: str):
-    """`_decide` for these static arguments, batched by ``vmap`` in chunks of `DECIDE_CHUNK` on a CPU."""
-
-    def one(track, scene, key):
-        return _decide(track, scene, key, with_spikes, config, lens, wiring)
-
-    batched = jax.custom_batching.custom_vmap(one)
-
-    @batched.def_vmap
-    def _rule(axis_size, in_batched, *args):
-        args = jax.tree.map(
-            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size, *jnp.shape(a))), args, tuple(in_batched)
-        )
-        if jax.default_backend() == "cpu" and axis_size > DECIDE_CHUNK:
-            out = jax.lax.map(lambda a: one(*a), args, batch_size=DECIDE_CHUNK)
-        else:
-            out = jax.vmap(one)(*args)
-        return out, jax.tree.map(lambda _: True, out)
-
-    return batched
+def _chunked(with_spikes: bool, config: edges.EdgeConfig, lens: str, wiring: str, chunk: int):
+    """`_decide` for these static arguments, batched by ``vmap`` in chunks of ``chunk`` on a CPU."""
+    return in_chunks_on_cpu(
+        lambda track, scene, key: _decide(track, scene, key, with_spikes, config, lens, wiring), chunk
+    )
 
 
 def _decide(track, scene, key, with_spikes: bool, config: edges.EdgeConfig, lens: str, wiring: str):

@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spikejax import bits
+from spikejax.devices import in_chunks_on_cpu
 from spikejax.errors import UserError
 from spikejax.vision.events import Events
 from spikejax.vision.hough.grids import CircleGrid, Grid, LineGrid, check_grid, line_table, ring_offsets
@@ -50,23 +51,10 @@ def _one_stream_at_a_time(fn):
 
     A scatter into a per-stream accumulator stays in the cache, and XLA's CPU
     backend runs it as one tight loop; a batched (or flattened) scatter touches
-    every stream's accumulator and is slower there. Other backends ``vmap``.
-    Arguments are positional arrays (``jax.custom_batching``).
+    every stream's accumulator and is slower there. Other backends ``vmap``
+    (`spikejax.devices.in_chunks_on_cpu`).
     """
-    batched = jax.custom_batching.custom_vmap(fn)
-
-    @batched.def_vmap
-    def _rule(axis_size, in_batched, *args):
-        args = jax.tree.map(
-            lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), args, tuple(in_batched)
-        )
-        if jax.default_backend() == "cpu":
-            out = jax.lax.map(lambda a: batched(*a), args)
-        else:
-            out = jax.vmap(fn)(*args)
-        return out, jax.tree.map(lambda _: True, out)
-
-    return batched
+    return in_chunks_on_cpu(fn)
 
 
 def _scatter_add(length: int, index, weight):
