@@ -187,6 +187,17 @@ def test_failure_labels_take_the_first_cause_that_applies():
     assert names == [None, "never_detected", "missed_bore", "wrong_side", "overshoot", "lost", "timeout"]
 
 
+def test_a_straight_lane_has_passed_its_target_once_it_is_a_margin_behind_along_the_course():
+    from robots.snake.reproduce_pipe import passed
+
+    start = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.6], [1.0, 1.0, 0.0]])
+    head = np.array([[3.0, 0.0], [2.0, 0.0], [0.5, 0.0], [0.0, 3.0], [1.0, 1.0]])
+    target = np.array([[1.5, 0.5], [1.5, 0.5], [-1.0, 0.0], [0.3, 1.9], [0.0, 0.0]])
+    # Along the course: 1.5 m behind; 0.5 m behind; moved only 0.5 m; 1.1 m behind (course along +y); not moved.
+    np.testing.assert_array_equal(passed(head, start, target, 1.0), [True, False, False, True, False])
+    np.testing.assert_array_equal(passed(head, start, target, 0.4), [True, True, True, True, False])
+
+
 def test_detection_rate_counts_slots_in_view_and_the_rest_apart():
     from robots.snake.reproduce_pipe import HEADER, summarize
 
