@@ -253,6 +253,8 @@ def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size:
     queue = size  # the next episode to start
     carry = start(keys[lane], pick(scenes, lane))
     lane_params = pick(params, lane)
+    straight = np.asarray(params.which) == pc.CONTROLLERS["straight"]  # per episode, for `passed`
+    origin, target = np.asarray(scenes.start), np.asarray(scenes.xy)[:, 0]
     parts: list[list] = [[] for _ in range(size)]
     ran = np.zeros(size, int)  # slots each lane's episode has run
     live = np.ones(size, bool)
@@ -265,10 +267,8 @@ def _episodes(env, scenes, keys, slots, params, progress: bool, desc: str, size:
         )
         ran += SEGMENT
         finished = live & ((np.asarray(carry[0].done) > 0) | (ran >= slots))
-        straight = np.asarray(lane_params.which) == pc.CONTROLLERS["straight"]
-        if straight.any():
-            target = np.asarray(scenes.xy)[lane, 0]
-            finished |= live & straight & passed(record["head"][:, -1], np.asarray(scenes.start)[lane], target)
+        if straight[lane].any():
+            finished |= live & straight[lane] & passed(record["head"][:, -1], origin[lane], target[lane])
         for i in np.flatnonzero(live):
             parts[i].append(jax.tree.map(lambda a, i=i: a[i], record))
         for i in np.flatnonzero(finished):
