@@ -102,9 +102,12 @@ def test_crossings_split_the_overflow_into_clipped_and_beyond_capacity():
     assert clipped == 40 and int(overflow[0]) - clipped == 80 - int(events.count()[0]) == 30
 
 
-def test_step_counts_are_the_event_list_counted_per_pixel():
-    # A moving bright bar with mismatch, refractory and heavy shot noise; the list large enough to hold every event.
-    params = dvs.dvs_params(threshold_sigma=0.05, noise_rate=20.0, refractory=2e-3)
+@pytest.mark.parametrize("refractory", [2e-3, 0.0])
+@pytest.mark.parametrize("params_traced", [True, False])
+def test_step_counts_are_the_event_list_counted_per_pixel(refractory, params_traced):
+    # A moving bright bar with mismatch, heavy shot noise and a refractory period or none (which `step_counts`
+    # computes apart: traced, through `lax.cond`; as a constant, chosen when tracing); the list holds every event.
+    params = dvs.dvs_params(threshold_sigma=0.05, noise_rate=20.0, refractory=refractory)
     x = jnp.arange(24)
     frames = [jnp.where((x[None, :] >= k) & (x[None, :] < k + 4), 0.9, 0.15) * jnp.ones((10, 1)) for k in range(6)]
     key = jax.random.key(4)
@@ -112,6 +115,8 @@ def test_step_counts_are_the_event_list_counted_per_pixel():
     dense_state, total = state, 0
     listed = jax.jit(functools.partial(dvs.step, capacity=2048, max_per_pixel=3))
     counted = jax.jit(functools.partial(dvs.step_counts, max_per_pixel=3))
+    if not params_traced:
+        counted = jax.jit(lambda _, *a, **k: dvs.step_counts(params, *a, max_per_pixel=3, **k))
     for k, frame in enumerate(frames[1:], start=1):
         kk = jax.random.fold_in(key, k)
         state, events, overflow = listed(params, state, frame, 0.01 * k, key=kk)

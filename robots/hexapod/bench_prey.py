@@ -67,7 +67,7 @@ from spikejax.benchmarking import (
     write_csv,
 )
 from spikejax.commands import Command, add_cpu_devices, count, writes_output
-from spikejax.devices import cpu_devices_for_run, shard_batch
+from spikejax.devices import cpu_devices_for_run, in_chunks_on_cpu, shard_batch
 from spikejax.errors import UserError
 
 # The hexapod's env is imported where it is used: it makes JAX arrays when
@@ -329,7 +329,8 @@ class SnnRun:
 
     `spikejax.vision.edges.sync_step` once a frame over `decision_counts` (the
     count images whose events `NumpyVisionRun` gets), from rest, and the
-    winner-take-all: what `decisions.decide` does after its DVS. Decision ``k``
+    winner-take-all: what `decisions.decide` does after its DVS, in its chunks
+    of `decisions.DECIDE_CHUNK` members on a CPU. Decision ``k``
     runs ``k`` gait cycles later in time (the same network: each starts at
     rest), so that no run repeats another's arithmetic for XLA to hoist.
     """
@@ -359,7 +360,8 @@ class SnnRun:
 
         self.batch, self.steps, self.devices = batch, steps, devices
         self.args = (jnp.broadcast_to(counts, (batch, *counts.shape)),)
-        fn = shard_batch(jax.vmap(one), jax.devices()[:devices])
+        # In chunks of members, as `decisions.decide` runs the network in the loop.
+        fn = shard_batch(jax.vmap(in_chunks_on_cpu(one, decisions.DECIDE_CHUNK)), jax.devices()[:devices])
         self.compiled, self.compile_s = compile_ahead(fn, *self.args)
         self.run_s = math.inf
 

@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from spikejax.random import threefry_uniform
 from spikejax.vision.events import Events, compact
@@ -207,52 +208,71 @@ class _Interval(NamedTuple):
     state: DVSState
 
 
-def _interval(params: DVSParams, state: DVSState, frame, t, max_per_pixel: int, key: jax.Array) -> _Interval:
-    frame = jnp.asarray(frame, jnp.float32)
-    t = jnp.asarray(t, jnp.float32)
-    t0 = state.t
-    log_frame = jnp.log(frame + params.eps)
-    ref, l0, l1 = state.reference, state.log_frame, log_frame
-    up = l1 >= ref
-    c = jnp.where(up, state.pos_threshold, state.neg_threshold)
-    n = crossings(params, state, frame)
-    direction = jnp.where(up, 1.0, -1.0)
-    slope = l1 - l0
-    safe = jnp.where(slope == 0, 1.0, slope)
-    last = state.last_event
-    fires, stamps = [], []
-    for k in range(1, max_per_pixel + 1):
-        level = ref + direction * k * c
-        frac = jnp.clip((level - l0) / safe, 0.0, 1.0)
-        tk = t0 + (t - t0) * jnp.where(slope == 0, 1.0, frac)
-        fire = (k <= n) & (tk - last >= params.refractory)
-        last = jnp.where(fire, tk, last)
-        fires.append(fire)
-        stamps.append(tk)
-    size = frame.size
+def _noise(params: DVSParams, key: jax.Array, t0, t, size: int):
+    """The interval's shot noise, one draw a pixel: ``(noise, polarity, time)``, each ``(size,)``."""
     k_noise, k_pol, k_time = jax.random.split(key, 3)
     p_noise = -jnp.expm1(-params.noise_rate * (t - t0))
     # `threefry_uniform` is `jax.random.uniform` (the same numbers), drawn in one pass on a CPU.
     noise = threefry_uniform(k_noise, (size,)) < p_noise
-    noise_pol = jnp.where(threefry_uniform(k_pol, (size,)) < 0.5, 1, -1).astype(jnp.int32)
-    noise_t = t0 + (t - t0) * threefry_uniform(k_time, (size,), 1e-6, 1.0)
-    new_state = DVSState(
-        reference=ref + direction * n * c,
-        log_frame=log_frame,
-        pos_threshold=state.pos_threshold,
-        neg_threshold=state.neg_threshold,
-        last_event=last,
-        t=t,
+    polarity = jnp.where(threefry_uniform(k_pol, (size,)) < 0.5, 1, -1).astype(jnp.int32)
+    return noise, polarity, t0 + (t - t0) * threefry_uniform(k_time, (size,), 1e-6, 1.0)
+
+
+class _Levels(NamedTuple):
+    """A pixel's way from its reference to the new frame's log intensity (what both counting paths share)."""
+
+    log_frame: jax.Array
+    up: jax.Array  # moving up from the reference: ON crossings
+    n: jax.Array  # thresholds crossed, int32
+    step: jax.Array  # signed threshold: the reference moves by it at each crossing
+
+
+def _levels(params: DVSParams, state: DVSState, frame) -> _Levels:
+    log_frame = jnp.log(frame + params.eps)
+    up = log_frame >= state.reference
+    c = jnp.where(up, state.pos_threshold, state.neg_threshold)
+    return _Levels(log_frame, up, crossings(params, state, frame), jnp.where(up, 1.0, -1.0) * c)
+
+
+def _crossing_time(state: DVSState, lv: _Levels, k, t):
+    """When the log intensity, moving linearly from the last frame's at ``state.t`` to ``lv``'s at ``t``, crosses level ``k``."""
+    l0, l1 = state.log_frame, lv.log_frame
+    slope = l1 - l0
+    safe = jnp.where(slope == 0, 1.0, slope)
+    level = state.reference + k * lv.step
+    frac = jnp.clip((level - l0) / safe, 0.0, 1.0)
+    return state.t + (t - state.t) * jnp.where(slope == 0, 1.0, frac)
+
+
+def _next_state(state: DVSState, lv: _Levels, last_event, t) -> DVSState:
+    """The pixels after the interval: the reference moved to the last level crossed."""
+    return state._replace(
+        reference=state.reference + lv.n * lv.step, log_frame=lv.log_frame, last_event=last_event, t=t
     )
+
+
+def _interval(params: DVSParams, state: DVSState, frame, t, max_per_pixel: int, key: jax.Array) -> _Interval:
+    frame = jnp.asarray(frame, jnp.float32)
+    t = jnp.asarray(t, jnp.float32)
+    lv = _levels(params, state, frame)
+    last = state.last_event
+    fires, stamps = [], []
+    for k in range(1, max_per_pixel + 1):
+        tk = _crossing_time(state, lv, k, t)
+        fire = (k <= lv.n) & (tk - last >= params.refractory)
+        last = jnp.where(fire, tk, last)
+        fires.append(fire)
+        stamps.append(tk)
+    noise, noise_pol, noise_t = _noise(params, key, state.t, t, frame.size)
     return _Interval(
         fires,
         stamps,
-        jnp.where(up, 1, -1).astype(jnp.int32),
+        jnp.where(lv.up, 1, -1).astype(jnp.int32),
         noise,
         noise_pol,
         noise_t,
-        jnp.sum(jnp.maximum(n - max_per_pixel, 0)),
-        new_state,
+        jnp.sum(jnp.maximum(lv.n - max_per_pixel, 0)),
+        _next_state(state, lv, last, t),
     )
 
 
@@ -310,12 +330,48 @@ def step_counts(
     scatter (for a consumer that reads a frame's events as counts, like
     `spikejax.vision.edges.sync_step`). A count image has no capacity.
 
+    Without a refractory period (``params.refractory == 0``) every crossing up to
+    ``max_per_pixel`` is an event, so the count is ``min(crossings, max_per_pixel)``
+    and only the last one's time is needed (for the state): the same counts and
+    state for a quarter of the crossing-time arithmetic (a third less time for
+    the hexapod's vision, docs/BENCHMARKS.md). The choice is made when tracing
+    where the refractory period is a constant, by ``lax.cond`` where it is traced.
+
     Returns:
         ``(state, counts, clipped)``: ``clipped`` the crossings beyond ``max_per_pixel``, summed.
     """
-    iv = _interval(params, state, frame, t, max_per_pixel, key)
-    counts = sum(f.astype(jnp.int32) for f in iv.fires) + iv.noise.reshape(iv.polarity.shape).astype(jnp.int32)
-    return iv.state, counts, iv.clipped
+
+    def every_crossing():
+        iv = _interval(params, state, frame, t, max_per_pixel, key)
+        counts = sum(f.astype(jnp.int32) for f in iv.fires) + iv.noise.reshape(iv.polarity.shape).astype(jnp.int32)
+        return iv.state, counts, iv.clipped
+
+    def without_refractory():
+        return _counts_without_refractory(params, state, frame, t, max_per_pixel, key)
+
+    refractory = params.refractory
+    if isinstance(refractory, jax.core.Tracer):
+        return jax.lax.cond(jnp.any(refractory > 0), every_crossing, without_refractory)
+    return every_crossing() if np.any(np.asarray(refractory) > 0) else without_refractory()
+
+
+def _counts_without_refractory(params: DVSParams, state: DVSState, frame, t, max_per_pixel: int, key: jax.Array):
+    """`step_counts` when no crossing is refractory: the first ``min(n, max_per_pixel)`` of a pixel's ``n`` crossings.
+
+    `_interval`'s crossing times never decrease with ``k`` within a pixel (its
+    log intensity stays within a threshold of the reference between intervals,
+    so a pixel moving against its crossing direction crosses at most once), so
+    with a refractory period of 0 each of its first ``max_per_pixel`` crossings
+    fires; the pixel's last event is its last such crossing, computed as there.
+    """
+    frame = jnp.asarray(frame, jnp.float32)
+    t = jnp.asarray(t, jnp.float32)
+    lv = _levels(params, state, frame)
+    fired = jnp.minimum(lv.n, max_per_pixel)
+    last = jnp.where(fired > 0, _crossing_time(state, lv, fired.astype(jnp.float32), t), state.last_event)
+    noise, _, _ = _noise(params, key, state.t, t, frame.size)
+    counts = fired + noise.reshape(frame.shape).astype(jnp.int32)
+    return _next_state(state, lv, last, t), counts, jnp.sum(jnp.maximum(lv.n - max_per_pixel, 0))
 
 
 @functools.partial(jax.jit, static_argnames=("capacity", "max_per_pixel"))
