@@ -22,7 +22,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 from spikejax.errors import UserError
 
-__all__ = ["cores", "workers_for_run", "pool", "shares"]
+__all__ = ["cores", "hold_to_core", "workers_for_run", "pool", "shares"]
 
 
 def cores() -> list[int]:
@@ -30,6 +30,17 @@ def cores() -> list[int]:
     if hasattr(os, "sched_getaffinity"):
         return sorted(os.sched_getaffinity(0))
     return list(range(os.cpu_count() or 1))
+
+
+def hold_to_core(index: int) -> None:
+    """Hold this process to its ``index``-th allowed core (cyclically), before JAX or MuJoCo start a thread pool.
+
+    XLA's CPU thread pool then has one thread, as on a one-core machine; a
+    process that may use every core runs a large XLA loop on all of them.
+    """
+    if hasattr(os, "sched_setaffinity"):
+        allowed = cores()
+        os.sched_setaffinity(0, {allowed[index % len(allowed)]})
 
 
 def workers_for_run(asked: int | None = None) -> int:
@@ -45,19 +56,18 @@ def workers_for_run(asked: int | None = None) -> int:
     return int(asked)
 
 
-def _pin(counter, allowed: list[int]) -> None:
+def _pin(counter) -> None:
     with counter.get_lock():
         index = counter.value
         counter.value += 1
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {allowed[index % len(allowed)]})
+    hold_to_core(index)  # a spawned process inherits its parent's allowed cores
 
 
 def pool(workers: int) -> ProcessPoolExecutor:
     """``workers`` fresh processes (``spawn``), the i-th pinned to this process's i-th core (cyclically)."""
     context = multiprocessing.get_context("spawn")
     counter = context.Value("i", 0)
-    return ProcessPoolExecutor(workers, mp_context=context, initializer=_pin, initargs=(counter, cores()))
+    return ProcessPoolExecutor(workers, mp_context=context, initializer=_pin, initargs=(counter,))
 
 
 def shares(n: int, workers: int) -> list[tuple[int, int]]:

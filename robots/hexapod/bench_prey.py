@@ -69,6 +69,7 @@ from spikejax.benchmarking import (
 from spikejax.commands import Command, add_cpu_devices, count, writes_output
 from spikejax.devices import cpu_devices_for_run, in_chunks_on_cpu, shard_batch
 from spikejax.errors import UserError
+from spikejax.workers import hold_to_core
 
 # The hexapod's env is imported where it is used: it makes JAX arrays when
 # imported, which would start JAX before `run` presents the CPU as several devices.
@@ -80,6 +81,7 @@ __all__ = [
     "CPhysicsRun",
     "ClosedLoopRun",
     "NumpyVisionRun",
+    "OnOneCore",
     "SnnRun",
     "VisionRun",
     "command",
@@ -381,6 +383,35 @@ class SnnRun:
         )
 
 
+class OnOneCore:
+    """A spikejax timer (``kind``: ``"loop"``, ``"vision"`` or ``"snn"``) on one core, in a process of its own.
+
+    A `Processes` factory: the process is held to its ``index``-th core before
+    JAX starts (`spikejax.workers.hold_to_core`), so XLA's thread pool has one
+    thread. A one-device program in a process that may use every core runs its
+    large loops on all of them: at batch 64 the closed loop took 6.8 ms a
+    decision so and 10.0 held to one core, the vision 4.8 and 7.8
+    (docs/BENCHMARKS.md). The one-core rows run so, and the all-core row of
+    one process a core. ``info`` is the row of the process's own batch.
+    """
+
+    def __init__(self, kind: str, batch: int, steps: int, index: int = 0):
+        hold_to_core(index)
+        self._run = {"loop": ClosedLoopRun, "vision": VisionRun, "snn": SnnRun}[kind](batch, steps, 1)
+
+    def __call__(self) -> float:
+        return self._run()
+
+    @property
+    def info(self) -> dict:
+        row = self._run.info
+        row["parallel"] += ", held to 1 core"
+        return row
+
+
+ONE_CORE_RUNS = ("loop", "vision", "snn")
+
+
 class NumpyVisionRun:
     """`reference.reference_vision` on the recorded decision's events, `NUMPY_DECISIONS` times a call, as a timer.
 
@@ -487,22 +518,32 @@ def run(
                 runs = {}
                 for p in cores:  # in a process of its own: beside the env's C pool, a second one can hang
                     runs["c", p] = inner.enter_context(Processes(CPhysicsRun, batch, n_c, nthread=p))
-                for p in cores:
-                    if batch >= p:
-                        runs["loop", p] = ClosedLoopRun(batch, n_loop, threads=p)
-                        runs["vision", p] = VisionRun(batch, n_loop, p)
-                        runs["snn", p] = SnnRun(batch, n_loop, p)
+                for kind in ONE_CORE_RUNS:
+                    runs[kind, 1] = inner.enter_context(Processes(OnOneCore, kind, batch, n_loop))
+                if n_dev > 1 and batch >= n_dev:
+                    runs["loop", n_dev] = ClosedLoopRun(batch, n_loop, threads=n_dev)
+                    runs["vision", n_dev] = VisionRun(batch, n_loop, n_dev)
+                    runs["snn", n_dev] = SnnRun(batch, n_loop, n_dev)
+                    if batch % n_dev == 0:
+                        runs["loop processes", n_dev] = inner.enter_context(
+                            Processes(OnOneCore, "loop", batch // n_dev, n_loop, processes=n_dev, index_arg="index")
+                        )
                 if i == 0:
                     runs.update({("numpy", p): pool for p, pool in numpy_pools.items()})
                 best = interleaved(runs, repeats)
                 for key, timer in runs.items():
-                    if key[0] == "c":
-                        new = timer.info()[0]
+                    if key[0] == "loop processes":
+                        p = key[1]
+                        one = timer.info()[0]
+                        new = _row("spikejax closed loop", batch, n_loop, one["compile_s"], best[key], p, "process")
+                        new["parallel"] = f"{p} processes, one a core, 1 C thread each"
                     elif key[0] == "numpy":
                         p = key[1]
                         new = _row(
                             "NumPy visual SNN (events given)", 1, NUMPY_DECISIONS * p, 0.0, best[key], p, "process"
                         )
+                    elif isinstance(timer, Processes):  # the C physics and the one-core rows
+                        new = timer.info()[0]
                     else:
                         new = timer.info
                     rows.append(new)

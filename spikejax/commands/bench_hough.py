@@ -90,7 +90,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib.util
-import os
 import time
 from pathlib import Path
 
@@ -115,6 +114,7 @@ from spikejax.devices import cpu_devices_for_run, shard_batch
 from spikejax.errors import UserError
 from spikejax.vision import dvs, hough, scenes
 from spikejax.vision.hough.reference import async_run_numpy
+from spikejax.workers import hold_to_core
 
 __all__ = ["PEERS", "TABLE1", "command", "frames", "mode_difference", "run"]
 
@@ -313,9 +313,7 @@ class _OneCoreRun:
     """
 
     def __init__(self, shape: str, mode: str, batch: int, core: int = 0):
-        if hasattr(os, "sched_setaffinity"):
-            cores = sorted(os.sched_getaffinity(0))
-            os.sched_setaffinity(0, {cores[core % len(cores)]})
+        hold_to_core(core)
         self._run, self.info = _spikejax(shape, mode, _row_events(shape, mode), batch, 1)
 
     def __call__(self) -> float:
