@@ -34,6 +34,13 @@ timed in the same run, at batch sizes 1 to 1,024, each on one core and on all:
   one event by event (the spikes differ where a frame's events would cross
   a threshold between them); the devices as for the vision.
 
+Each spikejax implementation's one-core row runs in a process of its own held
+to one core (`OnOneCore`: a one-device program in a process that may use
+every core runs its large loops on all of them). On all cores each runs
+twice: in this process (the C engine on one thread a core, the vision and
+the SNN split over one device a core) and as one process a core, each held to
+its core with a share of the batch, as `spikejax.workers` runs long jobs.
+
 Compile time is reported apart from run time (the fastest of ``--repeats``
 runs; the implementations of a batch are timed once a round,
 `spikejax.benchmarking.interleaved`). ``vs_c_physics`` is a row's decisions/s
@@ -524,19 +531,23 @@ def run(
                     runs["loop", n_dev] = ClosedLoopRun(batch, n_loop, threads=n_dev)
                     runs["vision", n_dev] = VisionRun(batch, n_loop, n_dev)
                     runs["snn", n_dev] = SnnRun(batch, n_loop, n_dev)
-                    if batch % n_dev == 0:
-                        runs["loop processes", n_dev] = inner.enter_context(
-                            Processes(OnOneCore, "loop", batch // n_dev, n_loop, processes=n_dev, index_arg="index")
+                    for kind in ONE_CORE_RUNS if batch % n_dev == 0 else ():
+                        runs["processes", n_dev, kind] = inner.enter_context(
+                            Processes(OnOneCore, kind, batch // n_dev, n_loop, processes=n_dev, index_arg="index")
                         )
                 if i == 0:
                     runs.update({("numpy", p): pool for p, pool in numpy_pools.items()})
                 best = interleaved(runs, repeats)
                 for key, timer in runs.items():
-                    if key[0] == "loop processes":
+                    if key[0] == "processes":  # the all-core row of one process a core, each a share of the batch
                         p = key[1]
                         one = timer.info()[0]
-                        new = _row("spikejax closed loop", batch, n_loop, one["compile_s"], best[key], p, "process")
-                        new["parallel"] = f"{p} processes, one a core, 1 C thread each"
+                        new = _row(one["impl"], batch, n_loop, one["compile_s"], best[key], p, "process")
+                        new["parallel"] = (
+                            f"{p} processes, one a core, 1 device"
+                            + (", 1 C thread" if key[2] == "loop" else "")
+                            + " each"
+                        )
                     elif key[0] == "numpy":
                         p = key[1]
                         new = _row(
@@ -560,12 +571,12 @@ def run(
     add_ratios(rows, "x_numpy", "decisions_per_s", lambda p, r: p["impl"].startswith("NumPy"))
     print(
         f"{'implementation':38s} {'batch':>5s} {'cores':>5s} {'compile s':>9s} {'decisions/s':>11s} "
-        f"{'sim s/s':>8s} {'vs C':>6s} {'x NumPy':>8s}"
+        f"{'sim s/s':>8s} {'vs C':>6s} {'x NumPy':>8s}  how"
     )
     for r in rows:
         print(
             f"{r['impl']:38s} {r['batch']:5d} {r['cores']:5d} {r['compile_s']:9.1f} {r['decisions_per_s']:11,.1f} "
-            f"{r['sim_s_per_wall_s']:8.1f} {r['vs_c_physics']:6.2f} {r['x_numpy']:8.1f}"
+            f"{r['sim_s_per_wall_s']:8.1f} {r['vs_c_physics']:6.2f} {r['x_numpy']:8.1f}  {r['parallel']}"
         )
     print(
         "  vs C: over MuJoCo C's physics alone at the same batch on as many cores; "
