@@ -397,8 +397,8 @@ class OnOneCore:
     JAX starts (`spikejax.workers.hold_to_core`), so XLA's thread pool has one
     thread. A one-device program in a process that may use every core runs its
     large loops on all of them: at batch 64 the closed loop took 6.8 ms a
-    decision so and 10.0 held to one core, the vision 4.8 and 7.8
-    (docs/BENCHMARKS.md). The one-core rows run so, and the all-core row of
+    decision in a free process and 10.0 held to one core, the vision 4.8 and
+    7.8 (docs/BENCHMARKS.md). The one-core rows run so, and the all-core row of
     one process a core. ``info`` is the row of the process's own batch.
     """
 
