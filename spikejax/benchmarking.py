@@ -38,8 +38,11 @@ from typing import Any
 
 import jax
 
+from spikejax.workers import hold_to_core
+
 __all__ = [
     "CORE_COLUMNS",
+    "HeldToOneCore",
     "JaxRun",
     "Processes",
     "add_ratios",
@@ -236,6 +239,31 @@ class Processes:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class HeldToOneCore:
+    """A `Processes` factory: the timer ``make(*args, **kwargs)`` built in a process held to one core.
+
+    The process is held to its ``index``-th core (`spikejax.workers.hold_to_core`)
+    before JAX starts a thread pool, so XLA's pool has one thread: a one-core
+    row. In a process free to use every core, XLA splits a one-device
+    program's large elementwise loops over all of them (the hexapod's vision
+    ran 1.6x, the snake pipe loop 1.5x faster so; docs/BENCHMARKS.md). With
+    `Processes`'s ``index_arg="index"``, process ``i`` of a pool holds core ``i``.
+    ``info`` is the timer's own.
+    """
+
+    def __init__(self, make: Callable, *args: Any, index: int = 0, **kwargs: Any):
+        hold_to_core(index)
+        self._timer = make(*args, **kwargs)
+
+    def __call__(self) -> float:
+        return self._timer()
+
+    @property
+    def info(self) -> Any:
+        info = getattr(self._timer, "info", None)
+        return info() if callable(info) else info
 
 
 def run_isolated(fn: Callable, *args: Any, **kwargs: Any) -> Any:

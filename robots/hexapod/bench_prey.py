@@ -35,7 +35,7 @@ timed in the same run, at batch sizes 1 to 1,024, each on one core and on all:
   a threshold between them); the devices as for the vision.
 
 Each spikejax implementation's one-core row runs in a process of its own held
-to one core (`OnOneCore`: a one-device program in a process that may use
+to one core (`ONE_CORE_RUNS`: a one-device program in a process that may use
 every core runs its large loops on all of them). On all cores each runs
 twice: in this process (the C engine on one thread a core, the vision and
 the SNN split over one device a core) and as one process a core, each held to
@@ -64,6 +64,7 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from spikejax.benchmarking import (
+    HeldToOneCore,
     Processes,
     add_ratios,
     compile_ahead,
@@ -76,7 +77,6 @@ from spikejax.benchmarking import (
 from spikejax.commands import Command, add_cpu_devices, count, writes_output
 from spikejax.devices import cpu_devices_for_run, in_chunks_on_cpu, shard_batch
 from spikejax.errors import UserError
-from spikejax.workers import hold_to_core
 
 # The hexapod's env is imported where it is used: it makes JAX arrays when
 # imported, which would start JAX before `run` presents the CPU as several devices.
@@ -88,7 +88,6 @@ __all__ = [
     "CPhysicsRun",
     "ClosedLoopRun",
     "NumpyVisionRun",
-    "OnOneCore",
     "SnnRun",
     "VisionRun",
     "command",
@@ -390,33 +389,10 @@ class SnnRun:
         )
 
 
-class OnOneCore:
-    """A spikejax timer (``kind``: ``"loop"``, ``"vision"`` or ``"snn"``) on one core, in a process of its own.
-
-    A `Processes` factory: the process is held to its ``index``-th core before
-    JAX starts (`spikejax.workers.hold_to_core`), so XLA's thread pool has one
-    thread. A one-device program in a process that may use every core runs its
-    large loops on all of them: at batch 64 the closed loop took 6.8 ms a
-    decision in a free process and 10.0 held to one core, the vision 4.8 and
-    7.8 (docs/BENCHMARKS.md). The one-core rows run so, and the all-core row of
-    one process a core. ``info`` is the row of the process's own batch.
-    """
-
-    def __init__(self, kind: str, batch: int, steps: int, index: int = 0):
-        hold_to_core(index)
-        self._run = {"loop": ClosedLoopRun, "vision": VisionRun, "snn": SnnRun}[kind](batch, steps, 1)
-
-    def __call__(self) -> float:
-        return self._run()
-
-    @property
-    def info(self) -> dict:
-        row = self._run.info
-        row["parallel"] += ", held to 1 core"
-        return row
-
-
-ONE_CORE_RUNS = ("loop", "vision", "snn")
+ONE_CORE_RUNS = {"loop": ClosedLoopRun, "vision": VisionRun, "snn": SnnRun}
+"""The spikejax timers, each also run on one core in a process of its own (`spikejax.benchmarking.HeldToOneCore`):
+a one-device program in a process free to use every core runs its large loops on all of them (at batch 64 the
+closed loop took 6.8 ms a decision so and 10.0 held to one core, the vision 4.8 and 7.8; docs/BENCHMARKS.md)."""
 
 
 class NumpyVisionRun:
@@ -525,35 +501,35 @@ def run(
                 runs = {}
                 for p in cores:  # in a process of its own: beside the env's C pool, a second one can hang
                     runs["c", p] = inner.enter_context(Processes(CPhysicsRun, batch, n_c, nthread=p))
-                for kind in ONE_CORE_RUNS:
-                    runs[kind, 1] = inner.enter_context(Processes(OnOneCore, kind, batch, n_loop))
+                for kind, timer in ONE_CORE_RUNS.items():
+                    runs["held", 1, kind] = inner.enter_context(Processes(HeldToOneCore, timer, batch, n_loop, 1))
                 if n_dev > 1 and batch >= n_dev:
-                    runs["loop", n_dev] = ClosedLoopRun(batch, n_loop, threads=n_dev)
-                    runs["vision", n_dev] = VisionRun(batch, n_loop, n_dev)
-                    runs["snn", n_dev] = SnnRun(batch, n_loop, n_dev)
-                    for kind in ONE_CORE_RUNS if batch % n_dev == 0 else ():
-                        runs["processes", n_dev, kind] = inner.enter_context(
-                            Processes(OnOneCore, kind, batch // n_dev, n_loop, processes=n_dev, index_arg="index")
+                    for kind, timer in ONE_CORE_RUNS.items():  # in this process; the C engine on a thread a core
+                        runs[kind, n_dev] = timer(batch, n_loop, n_dev)
+                    for kind, timer in ONE_CORE_RUNS.items() if batch % n_dev == 0 else ():
+                        runs["held", n_dev, kind] = inner.enter_context(
+                            Processes(
+                                HeldToOneCore, timer, batch // n_dev, n_loop, 1, processes=n_dev, index_arg="index"
+                            )
                         )
                 if i == 0:
                     runs.update({("numpy", p): pool for p, pool in numpy_pools.items()})
                 best = interleaved(runs, repeats)
                 for key, timer in runs.items():
-                    if key[0] == "processes":  # the all-core row of one process a core, each a share of the batch
-                        p = key[1]
-                        one = timer.info()[0]
+                    if key[0] == "held":  # processes held to one core each, each the batch or a share of it
+                        p, one = key[1], timer.info()[0]
                         new = _row(one["impl"], batch, n_loop, one["compile_s"], best[key], p, "process")
                         new["parallel"] = (
-                            f"{p} processes, one a core, 1 device"
-                            + (", 1 C thread" if key[2] == "loop" else "")
-                            + " each"
+                            f"{one['parallel']}, held to 1 core"
+                            if p == 1
+                            else f"{p} processes, one a core, {one['parallel']} each"
                         )
                     elif key[0] == "numpy":
                         p = key[1]
                         new = _row(
                             "NumPy visual SNN (events given)", 1, NUMPY_DECISIONS * p, 0.0, best[key], p, "process"
                         )
-                    elif isinstance(timer, Processes):  # the C physics and the one-core rows
+                    elif key[0] == "c":
                         new = timer.info()[0]
                     else:
                         new = timer.info
