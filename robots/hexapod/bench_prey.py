@@ -392,7 +392,8 @@ class SnnRun:
 ONE_CORE_RUNS = {"loop": ClosedLoopRun, "vision": VisionRun, "snn": SnnRun}
 """The spikejax timers, each also run on one core in a process of its own (`spikejax.benchmarking.HeldToOneCore`):
 a one-device program in a process free to use every core runs its large loops on all of them (at batch 64 the
-closed loop took 6.8 ms a decision so and 10.0 held to one core, the vision 4.8 and 7.8; docs/BENCHMARKS.md)."""
+closed loop took 6.8 ms a decision in a free process and 10.0 held to one core, the vision 4.8 and 7.8;
+docs/BENCHMARKS.md)."""
 
 
 class NumpyVisionRun:

@@ -23,8 +23,9 @@ Placements are sampled per episode (`robots.snake.pipes.sample`). Cases
 Each case runs on one core (one CPU device, MuJoCo C on one thread, in a
 process of its own held to one core: in a process free to use every core XLA
 splits the loop's image-sized work over all of them, 1.5x faster at batch 64,
-`spikejax.benchmarking.HeldToOneCore`) and on all cores (the batch split over every CPU device, `spikejax.devices.shard_batch`,
-MuJoCo on one thread a device), at every batch of ``--batches``. Compile
+`spikejax.benchmarking.HeldToOneCore`) and on all cores (the batch split over
+every CPU device, `spikejax.devices.shard_batch`, MuJoCo on one thread a
+device), at every batch of ``--batches``. Compile
 time (``lower(...).compile()``) is reported apart from run time, which is
 the fastest of ``--repeats`` rounds; the runs of a batch are timed in
 interleaved rounds (`spikejax.benchmarking.interleaved`). A timed run is
