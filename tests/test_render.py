@@ -418,3 +418,25 @@ def test_boxes_render_batched_under_vmap_with_traced_positions():
     for i, x in enumerate(np.asarray(xs)):
         np.testing.assert_allclose(batch[i], one(x), atol=1e-6)
     assert not np.allclose(batch[0], batch[2])
+
+
+def test_a_flat_scene_renders_the_shading_formula_exactly_without_the_normals():
+    # ambient the number 1 takes the shortcut; the same scene with ambient traced runs the formula.
+    camera = render.Camera(width=64, height=48)
+    scene = render.Scene(
+        render.spheres([[2.5, 0.6, 0.3]], [0.3], [0.2]),
+        render.standing_cylinder(3.0, -0.8, 0.2, 0.8, brightness=0.3),
+        ground_brightness=0.6,
+        sky_brightness=0.9,
+        ambient=1.0,
+        annuli=render.Annuli(
+            jnp.array([[4.0, 0.0, 0.5]]), jnp.array([[-1.0, 0.0, 0.0]]), jnp.array([0.1]), jnp.array([0.3]),
+            jnp.array([0.45]),
+        ),
+        boxes=render.boxes([2.0, 0.1, 0.1], 0.1, 0.4, 0.1),
+    )  # fmt: skip
+    pos, rot = jnp.array([0.0, 0.0, 0.4]), jnp.asarray(_yaw(0.1))
+    flat = np.asarray(jax.jit(lambda p: render.render(scene, p, rot, camera))(pos))
+    traced = np.asarray(jax.jit(lambda p, a: render.render(scene._replace(ambient=a), p, rot, camera))(pos, 1.0))
+    np.testing.assert_array_equal(flat, traced)
+    assert set(np.unique(flat)) == {np.float32(v) for v in (0.2, 0.3, 0.45, 0.1, 0.6, 0.9)}
