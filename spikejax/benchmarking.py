@@ -248,7 +248,8 @@ class HeldToOneCore:
     before JAX starts a thread pool, so XLA's pool has one thread: a one-core
     row. In a process free to use every core, XLA splits a one-device
     program's large elementwise loops over all of them (the hexapod's vision
-    ran 1.6x, the snake pipe loop 1.5x faster so; docs/BENCHMARKS.md). With
+    ran 1.6x, the snake pipe loop 1.5x faster so, the RoboBee flights 1.4-1.9x
+    slower; docs/BENCHMARKS.md). With
     `Processes`'s ``index_arg="index"``, process ``i`` of a pool holds core ``i``.
     ``info`` is the timer's own.
     """
