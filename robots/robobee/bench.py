@@ -26,8 +26,9 @@ per second (350 neurons x steps x flights / run seconds), and the cores it used
 (``cores``, ``parallel``). `run` builds every row's program first (Brian2 in
 processes of its own, `spikejax.benchmarking.Processes`; spikejax compiled
 ahead, its one-device rows each in a process held to one core, `HeldFlights`
-through `spikejax.benchmarking.HeldToOneCore`: in a free process XLA's threads
-made a one-device batch of 64 flights 1.4-1.9x slower), then times each once a round, the best of ``--repeats`` rounds kept
+through `spikejax.benchmarking.HeldToOneCore`: in a free process XLA's
+threads made a one-device batch of 64 flights 1.4-1.9x slower), then times
+each once a round, the best of ``--repeats`` rounds kept
 (`spikejax.benchmarking.interleaved`), prints the closed-loop table and then,
 unless ``--no-network``, the network-alone table of
 `robots.robobee.bench_network.run`. Every row is quoted against one Brian2
