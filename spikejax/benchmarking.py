@@ -43,6 +43,7 @@ from spikejax.workers import hold_to_core
 __all__ = [
     "CORE_COLUMNS",
     "HeldToOneCore",
+    "held_row",
     "JaxRun",
     "Processes",
     "add_ratios",
@@ -265,6 +266,11 @@ class HeldToOneCore:
     def info(self) -> Any:
         info = getattr(self._timer, "info", None)
         return info() if callable(info) else info
+
+
+def held_row(row: dict) -> dict:
+    """``row``, the info of a timer run under `HeldToOneCore`, its ``parallel`` saying so."""
+    return {**row, "parallel": f"{row['parallel']}, held to 1 core"}
 
 
 def run_isolated(fn: Callable, *args: Any, **kwargs: Any) -> Any:

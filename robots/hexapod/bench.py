@@ -37,6 +37,7 @@ from spikejax.benchmarking import (
     add_ratios,
     compile_ahead,
     cores_label,
+    held_row,
     interleaved,
     machine_banner,
     write_csv,
@@ -262,8 +263,7 @@ def run(
                     row["impl"] += f", {key[1]} processes"
                 rows.append(row)
             elif isinstance(timer, Processes):
-                info = timer.info()[0]
-                rows.append({**info, "parallel": f"{info['parallel']}, held to 1 core"})
+                rows.append(held_row(timer.info()[0]))
             else:
                 rows.append(timer.info)
     finally:

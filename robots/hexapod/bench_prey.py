@@ -69,6 +69,7 @@ from spikejax.benchmarking import (
     add_ratios,
     compile_ahead,
     cores_label,
+    held_row,
     interleaved,
     machine_banner,
     plot_rows,
@@ -524,7 +525,7 @@ def run(
                         p, one = key[1], timer.info()[0]
                         new = _row(one["impl"], batch, n_loop, one["compile_s"], best[key], p, "process")
                         new["parallel"] = (
-                            f"{one['parallel']}, held to 1 core"
+                            held_row(one)["parallel"]
                             if p == 1
                             else f"{p} processes, one a core, {one['parallel']} each"
                         )

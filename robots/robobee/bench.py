@@ -62,6 +62,7 @@ from spikejax.benchmarking import (
     batch_sizes,
     compile_ahead,
     cores_label,
+    held_row,
     interleaved,
     machine_banner,
     write_csv,
@@ -634,8 +635,7 @@ def run(
                     )
                 )
             elif isinstance(runner, Processes):
-                row = runner.info()[0]
-                rows.append({**row, "parallel": f"{row['parallel']}, held to 1 core"})
+                rows.append(held_row(runner.info()[0]))
             else:
                 rows.append(_flights_row(infos[key[1]], best[key], runner.result))
     for r in rows:

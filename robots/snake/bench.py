@@ -63,6 +63,7 @@ from spikejax.benchmarking import (
     add_ratios,
     compile_ahead,
     cores_label,
+    held_row,
     interleaved,
     machine_banner,
     plot_rows,
@@ -286,11 +287,6 @@ class ClosedLoopRun:
         )
 
 
-def _held(row: dict) -> dict:
-    """``row``, timed in a process held to one core, saying so."""
-    return {**row, "parallel": f"{row['parallel']}, held to 1 core"}
-
-
 def bench_closed_loop(backend: str, batch: int, n: int, *, repeats: int = 2, nthread: int | None = None) -> dict:
     """`ClosedLoopRun`, the fastest of ``repeats`` runs; compile apart."""
     run = ClosedLoopRun(backend, batch, n, nthread)
@@ -392,12 +388,12 @@ def run(
                         else ClosedLoopRun("mujoco", batch, n_c, t)
                     )
             interleaved(runs, repeats)  # each run keeps its best in its row
-            new = [_held(r.info()[0]) if isinstance(r, Processes) else r.info for r in runs.values()]
+            new = [held_row(r.info()[0]) if isinstance(r, Processes) else r.info for r in runs.values()]
             if "mjx" in backends and batch in mjx_batches:  # in a fresh process: see the module docstring
                 n = _control_steps(batch, phys.substeps, MJX_BUDGET)
                 with Processes(HeldToOneCore, ClosedLoopRun, "mjx", batch, n) as mjx:
                     mjx()
-                    new.append(_held(mjx.info()[0]))
+                    new.append(held_row(mjx.info()[0]))
         for r in new:
             bar.write(
                 f"  {r['impl']}, batch {batch}, {r['parallel']}: {r['env_steps_per_s']:,.0f} env-steps/s "
